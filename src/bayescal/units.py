@@ -1,0 +1,111 @@
+"""Units at the edge: conversion of measured columns to the SI units used inside.
+
+Inside bayescal every quantity is in SI units, temperatures in °C (differences
+in K). Data files declare the unit of each column; :func:`to_internal`
+converts to the internal unit of the quantity's dimension. Only affine
+conversions are needed, so a small table is kept here rather than a units
+library.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+
+from bayescal.errors import DataError
+
+
+@dataclass(frozen=True)
+class _Unit:
+    dimension: str
+    scale: float
+    offset: float = 0.0  # internal = value * scale + offset
+
+
+# Spellings accepted for each unit (case-sensitive where SI prefixes matter).
+_UNITS: dict[str, _Unit] = {}
+
+
+def _add(names: tuple[str, ...], dimension: str, scale: float, offset: float = 0.0) -> None:
+    for name in names:
+        _UNITS[name] = _Unit(dimension, scale, offset)
+
+
+_add(("degC", "°C", "C", "celsius"), "temperature", 1.0)
+_add(("K", "kelvin"), "temperature", 1.0, -273.15)
+_add(("degF", "°F", "F", "fahrenheit"), "temperature", 5.0 / 9.0, -32.0 * 5.0 / 9.0)
+_add(("W/m2", "W/m²", "W m-2", "W/m^2"), "heat_flux", 1.0)
+_add(("kW/m2", "kW/m²", "kW m-2", "kW/m^2"), "heat_flux", 1000.0)
+_add(("W",), "power", 1.0)
+_add(("kW",), "power", 1000.0)
+_add(("m/s", "m s-1"), "speed", 1.0)
+_add(("km/h",), "speed", 1000.0 / 3600.0)
+_add(("deg", "°", "degree"), "angle", 1.0)
+_add(("%",), "fraction_percent", 1.0)
+_add(("1", "-", "fraction"), "dimensionless", 1.0)
+_add(("Pa",), "pressure", 1.0)
+_add(("hPa", "mbar"), "pressure", 100.0)
+_add(("kPa",), "pressure", 1000.0)
+
+INTERNAL_UNIT = {
+    "temperature": "°C",
+    "heat_flux": "W/m²",
+    "power": "W",
+    "speed": "m/s",
+    "angle": "°",
+    "fraction_percent": "%",
+    "dimensionless": "1",
+    "pressure": "Pa",
+}
+
+
+def known_units() -> list[str]:
+    """All accepted unit spellings."""
+    return sorted(_UNITS)
+
+
+def dimension_of(unit: str) -> str:
+    """The physical dimension of a unit spelling, e.g. ``"temperature"`` for ``"degF"``.
+
+    Raises
+    ------
+    DataError
+        If the unit is not known.
+    """
+    try:
+        return _UNITS[unit].dimension
+    except KeyError:
+        raise DataError(
+            f"unknown unit {unit!r}",
+            hint="use one of " + ", ".join(known_units()),
+        ) from None
+
+
+def to_internal(values: npt.ArrayLike, unit: str, *, dimension: str | None = None) -> np.ndarray:
+    """Convert values in ``unit`` to the internal unit of its dimension.
+
+    Parameters
+    ----------
+    values
+        Values in ``unit``.
+    unit
+        Unit spelling, e.g. ``"degF"``, ``"kW"``.
+    dimension
+        If given, the dimension the caller expects; a unit of another dimension
+        is an error (``"kW"`` for a temperature column).
+
+    Returns
+    -------
+    numpy.ndarray
+        Values in the internal unit (see ``INTERNAL_UNIT``), as float64.
+    """
+    dim = dimension_of(unit)
+    if dimension is not None and dim != dimension:
+        raise DataError(
+            f"unit {unit!r} is a {dim.replace('_', ' ')} unit, expected a "
+            f"{dimension.replace('_', ' ')} unit such as {INTERNAL_UNIT[dimension]!r}"
+        )
+    u = _UNITS[unit]
+    return np.asarray(values, dtype=float) * u.scale + u.offset
