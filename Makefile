@@ -1,0 +1,44 @@
+# bayescal — set-up, demo, tests and checks.
+# `make demo` and `make test` each create .venv if missing and install what they need.
+
+PYTHON ?= python3
+VENV   ?= .venv
+BIN    := $(VENV)/bin
+STAMP  := $(VENV)/.installed-stamp
+EXTRAS ?= dev,energyplus,dask,fmu
+
+.PHONY: demo test test-fast check bench docs clean help
+
+help:
+	@echo "make demo   - set up .venv and run the paper's wall example end to end"
+	@echo "make test   - set up .venv and run the whole test suite"
+	@echo "make check  - ruff (lint + format check) and mypy"
+	@echo "make bench  - the quick benchmark set (ratios measured in one process)"
+
+$(BIN)/python:
+	$(PYTHON) -m venv $(VENV)
+
+$(STAMP): pyproject.toml | $(BIN)/python
+	$(BIN)/python -m pip install --upgrade pip
+	$(BIN)/python -m pip install -e ".[$(EXTRAS)]"
+	touch $(STAMP)
+
+demo: $(STAMP)
+	$(BIN)/python -m bayescal.demo
+
+test: $(STAMP)
+	$(BIN)/python -m pytest
+
+test-fast: $(STAMP)
+	$(BIN)/python -m pytest -m "not slow"
+
+check: $(STAMP)
+	$(BIN)/ruff check src tests benchmarks
+	$(BIN)/ruff format --check src tests benchmarks
+	$(BIN)/mypy
+
+bench: $(STAMP)
+	OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 $(BIN)/python benchmarks/run_quick.py
+
+clean:
+	rm -rf $(VENV) build dist .pytest_cache .mypy_cache .ruff_cache demo-out
