@@ -1,0 +1,61 @@
+"""Period layout: warm-up, whole training periods ending at the test window, test cover."""
+
+import numpy as np
+import pytest
+
+from bayescal.errors import DataError
+from bayescal.periods import layout_periods
+
+
+def test_paper_wall_layout() -> None:
+    # The paper's wall: 1500 half-hourly values, last 300 test, daily periods of 48.
+    lay = layout_periods(1500, 48, warmup=0, test=300)
+    assert lay.m_star == 25
+    assert lay.train_starts[0] == 0
+    assert lay.train_starts[-1] + 48 == 1200 == lay.test_begin
+    # 300 test samples need 7 periods of 48; they end at the end of the record.
+    assert lay.test_starts.size == 7
+    assert lay.test_starts[-1] + 48 == 1500
+    assert lay.test_starts[0] <= lay.test_begin
+
+
+def test_leftover_samples_join_the_warmup() -> None:
+    lay = layout_periods(1000, 48, warmup=100, test=200)
+    # 700 training samples -> 14 whole periods (672), the 28 left over precede them.
+    assert lay.m_star == 14
+    assert lay.train_starts[0] == 100 + 28
+    assert lay.train_starts[-1] + 48 == 800
+
+
+def test_cut_shapes_and_values() -> None:
+    lay = layout_periods(200, 10, warmup=20, test=30)
+    series = np.arange(200.0)
+    cut = lay.cut(series)
+    assert cut.shape == (10, lay.m_star)
+    np.testing.assert_array_equal(
+        cut[:, 0], np.arange(lay.train_starts[0], lay.train_starts[0] + 10)
+    )
+    stacked = lay.cut(np.stack([series, -series]))
+    assert stacked.shape == (2, 10, lay.m_star)
+    np.testing.assert_array_equal(stacked[1], -cut)
+    test_cut = lay.cut(series, "test")
+    assert test_cut[-1, -1] == 199
+
+
+def test_periods_with_missing_samples_are_dropped() -> None:
+    missing = np.zeros(200, dtype=bool)
+    missing[75] = True
+    lay = layout_periods(200, 10, warmup=20, test=30, missing=missing)
+    assert 70 in lay.dropped_starts
+    assert 70 not in lay.train_starts
+    assert lay.m_star == 14
+
+
+def test_too_short_record_is_a_clear_error() -> None:
+    with pytest.raises(DataError, match=r"record has 50 samples but .* need 62"):
+        layout_periods(50, 48, warmup=10, test=4)
+
+
+def test_all_periods_missing_is_an_error() -> None:
+    with pytest.raises(DataError, match="all 3 training periods contain missing"):
+        layout_periods(30, 10, warmup=0, test=0, missing=np.ones(30, dtype=bool))
