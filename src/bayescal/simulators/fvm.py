@@ -166,10 +166,17 @@ def build_mesh(
                 f"cells must give a positive count for each of the {len(layers)} layers, "
                 f"got {list(cells)}"
             )
-    dx = np.concatenate([np.full(c, layer.thickness / c) for layer, c in zip(layers, counts, strict=True)])
-    k = np.concatenate([np.full(c, layer.conductivity) for layer, c in zip(layers, counts, strict=True)])
+    dx = np.concatenate(
+        [np.full(c, layer.thickness / c) for layer, c in zip(layers, counts, strict=True)]
+    )
+    k = np.concatenate(
+        [np.full(c, layer.conductivity) for layer, c in zip(layers, counts, strict=True)]
+    )
     rc = np.concatenate(
-        [np.full(c, layer.density * layer.specific_heat) for layer, c in zip(layers, counts, strict=True)]
+        [
+            np.full(c, layer.density * layer.specific_heat)
+            for layer, c in zip(layers, counts, strict=True)
+        ]
     )
     half = 0.5 * rc * dx
     capacity = np.zeros(dx.size + 1)
