@@ -1,0 +1,301 @@
+"""Several chains of one sampler, serially or in worker processes.
+
+Chain ``k`` gets its own generator ``numpy.random.default_rng(child_k)`` with
+``child_k = numpy.random.SeedSequence(seed).spawn(n_chains)[k]``, so the draws
+depend on the seed only, not on whether the chains ran in parallel or in
+which order they finished. In processes (``concurrent.futures``), the
+log-density, the sampler and the starting points are pickled: use module-level
+functions or instances of module-level classes.
+"""
+
+from __future__ import annotations
+
+import pickle
+from collections.abc import Callable, Sequence
+from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
+from dataclasses import dataclass
+from multiprocessing import Manager
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from bayescal.calibration.samplers.base import Callback, LogDensity, Sampler, SamplerResult
+from bayescal.errors import ConfigError
+
+StartFunction = Callable[[np.random.Generator], ArrayLike]
+"""Draws a starting point (d,) with the chain's own generator."""
+
+
+@dataclass(frozen=True)
+class Chains:
+    """The results of several chains of one sampler on one target.
+
+    Attributes
+    ----------
+    results
+        One :class:`SamplerResult` per chain.
+    names
+        Parameter names, one per coordinate.
+    seed
+        Entropy of the root ``SeedSequence`` the chains were spawned from.
+    """
+
+    results: tuple[SamplerResult, ...]
+    names: tuple[str, ...]
+    seed: int
+
+    @property
+    def draws(self) -> NDArray[np.float64]:
+        """Draws, ``(n_chains, n_draws, d)``."""
+        return np.stack([r.draws for r in self.results])
+
+    @property
+    def log_density(self) -> NDArray[np.float64]:
+        """Log-density at the draws, ``(n_chains, n_draws)``."""
+        return np.stack([r.log_density for r in self.results])
+
+    @property
+    def acceptance(self) -> NDArray[np.float64]:
+        """Acceptance rate after burn-in, ``(n_chains, d)`` (NaN for fixed coordinates)."""
+        return np.stack([r.acceptance for r in self.results])
+
+    @property
+    def n_chains(self) -> int:
+        """Number of chains."""
+        return len(self.results)
+
+
+def dispersed_starts(
+    lower: ArrayLike,
+    upper: ArrayLike,
+    n_chains: int,
+    rng: np.random.Generator,
+    center: ArrayLike | None = None,
+    spread: ArrayLike = 1.0,
+) -> NDArray[np.float64]:
+    """Starting points spread over the support, ``(n_chains, d)``.
+
+    Coordinates bounded on both sides are drawn from a Latin hypercube over
+    the middle 90 % of the interval (one stratum per chain); the others from
+    ``center + spread * N(0, 1)``, folded to the bounded side if one bound exists.
+
+    Parameters
+    ----------
+    lower, upper
+        Bounds per coordinate, ``(d,)`` (``-inf``/``inf`` for none).
+    n_chains
+        Number of starting points.
+    rng
+        Random generator.
+    center, spread
+        Location and scale for coordinates not bounded on both sides; default
+        center 0 (or 1 beyond a one-sided bound).
+    """
+    lo = np.asarray(lower, dtype=float).reshape(-1)
+    hi = np.asarray(upper, dtype=float).reshape(-1)
+    d = lo.size
+    both = np.isfinite(lo) & np.isfinite(hi)
+    strata = (
+        np.argsort(rng.random((d, n_chains)), axis=1).T + rng.random((n_chains, d))
+    ) / n_chains
+    width = np.where(both, hi - lo, 0.0)
+    starts = np.where(both, lo, 0.0) + width * (0.05 + 0.9 * strata)
+    c = np.zeros(d) if center is None else np.broadcast_to(np.asarray(center, float), (d,))
+    c = np.where(np.isfinite(lo) & ~both & (c <= lo), lo + 1.0, c)
+    c = np.where(np.isfinite(hi) & ~both & (c >= hi), hi - 1.0, c)
+    free = c + np.asarray(spread, dtype=float) * rng.standard_normal((n_chains, d))
+    free = np.where(np.isfinite(lo) & (free <= lo), 2 * lo - free, free)
+    free = np.where(np.isfinite(hi) & (free >= hi), 2 * hi - free, free)
+    out: NDArray[np.float64] = np.where(both, starts, free)
+    return out
+
+
+def run_chains(
+    sampler: Sampler,
+    log_density: LogDensity,
+    starts: ArrayLike | StartFunction,
+    n_draws: int,
+    *,
+    seed: int,
+    n_chains: int | None = None,
+    names: Sequence[str] | None = None,
+    parallel: bool = True,
+    max_workers: int | None = None,
+    callback: Callback | None = None,
+) -> Chains:
+    """Run ``n_chains`` chains of ``sampler`` and collect them.
+
+    Parameters
+    ----------
+    sampler
+        Any :class:`~bayescal.calibration.samplers.base.Sampler`.
+    log_density
+        The target (picklable when ``parallel``).
+    starts
+        Starting points ``(n_chains, d)``, or a function drawing one from the
+        chain's generator (see :func:`dispersed_starts`).
+    n_draws
+        Draws to keep per chain.
+    seed
+        Root seed; chain ``k`` uses ``SeedSequence(seed).spawn(n_chains)[k]``.
+    n_chains
+        Number of chains (the diagnostics expect at least 4); default: the
+        number of rows of ``starts``, or 4 with a start function.
+    names
+        Parameter names; default ``x0, x1, ...``.
+    parallel
+        Run the chains in worker processes (``ProcessPoolExecutor``).
+    max_workers
+        Worker processes; default ``min(n_chains, os.cpu_count())``.
+    callback
+        Called in this process with the iterations completed over all chains
+        (the total is ``n_chains * (n_burn + n_draws * thin)``); from worker
+        processes the count arrives in steps of about 1 % per chain.
+
+    Returns
+    -------
+    Chains
+    """
+    start_list = _start_list(starts, n_chains)
+    n_chains = len(start_list)
+    children = np.random.SeedSequence(seed).spawn(n_chains)
+    if parallel and n_chains > 1:
+        _check_picklable(log_density, sampler, starts)
+        results = _run_parallel(
+            sampler, log_density, start_list, n_draws, children, max_workers, callback
+        )
+    else:
+        results = []
+        for k, child in enumerate(children):
+            offset = k * _iterations(sampler, n_draws)
+            report = None if callback is None else _Offset(callback, offset)
+            results.append(_run_one(sampler, log_density, start_list[k], n_draws, child, report))
+    d = results[0].draws.shape[1]
+    chain_names = tuple(names) if names is not None else tuple(f"x{i}" for i in range(d))
+    if len(chain_names) != d:
+        raise ConfigError(f"got {len(chain_names)} parameter names for {d} coordinates")
+    return Chains(tuple(results), chain_names, int(seed))
+
+
+def _start_list(starts: ArrayLike | StartFunction, n_chains: int | None) -> list[Any]:
+    if n_chains is not None and (int(n_chains) != n_chains or n_chains < 1):
+        raise ConfigError(f"n_chains must be a positive integer, got {n_chains!r}")
+    if callable(starts):
+        return [starts] * (4 if n_chains is None else n_chains)
+    arr = np.asarray(starts, dtype=float)
+    rows = arr.shape[0] if arr.ndim == 2 and n_chains is None else n_chains
+    if arr.ndim != 2 or arr.shape[0] != rows or rows < 1:
+        raise ConfigError(
+            f"starts must have shape (n_chains, d) = ({rows}, d), got {arr.shape}",
+            hint="give one starting point per chain, e.g. from dispersed_starts()",
+        )
+    return list(arr)
+
+
+def _check_picklable(*objects: object) -> None:
+    for obj in objects:
+        try:
+            pickle.dumps(obj)
+        except (pickle.PicklingError, AttributeError, TypeError) as exc:
+            raise ConfigError(
+                f"cannot send {type(obj).__name__} {obj!r:.60} to worker processes: {exc}",
+                hint="define it at module level (no lambdas or local functions), "
+                "or run the chains with parallel=False",
+            ) from exc
+
+
+def _iterations(sampler: Sampler, n_draws: int) -> int:
+    return int(getattr(sampler, "n_burn", 0)) + n_draws * int(getattr(sampler, "thin", 1))
+
+
+def _run_one(
+    sampler: Sampler,
+    log_density: LogDensity,
+    start: Any,
+    n_draws: int,
+    seed: np.random.SeedSequence,
+    callback: Callback | None,
+) -> SamplerResult:
+    rng = np.random.default_rng(seed)
+    x0 = start(rng) if callable(start) else start
+    return sampler.run(log_density, x0, n_draws, rng, callback=callback)
+
+
+@dataclass(frozen=True)
+class _Offset:
+    """Serial progress: add the iterations of the chains already done."""
+
+    callback: Callback
+    offset: int
+
+    def __call__(self, iteration: int) -> None:
+        self.callback(self.offset + iteration)
+
+
+@dataclass(frozen=True)
+class _QueueReporter:
+    """Worker-side progress: put ``(chain, iteration)`` on a queue about every 1 %."""
+
+    queue: Any
+    chain: int
+    every: int
+    total: int
+
+    def __call__(self, iteration: int) -> None:
+        if iteration % self.every == 0 or iteration == self.total:
+            self.queue.put((self.chain, iteration))
+
+
+def _run_parallel(
+    sampler: Sampler,
+    log_density: LogDensity,
+    starts: list[Any],
+    n_draws: int,
+    children: list[np.random.SeedSequence],
+    max_workers: int | None,
+    callback: Callback | None,
+) -> list[SamplerResult]:
+    n = len(children)
+    total = _iterations(sampler, n_draws)
+    workers = max_workers if max_workers is not None else n
+    with ProcessPoolExecutor(max_workers=min(workers, n)) as pool:
+        if callback is None:
+            futures = [
+                pool.submit(_run_one, sampler, log_density, starts[k], n_draws, children[k], None)
+                for k in range(n)
+            ]
+            return [f.result() for f in futures]
+        with Manager() as manager:
+            queue = manager.Queue()
+            every = max(1, total // 100)
+            futures = [
+                pool.submit(
+                    _run_one,
+                    sampler,
+                    log_density,
+                    starts[k],
+                    n_draws,
+                    children[k],
+                    _QueueReporter(queue, k, every, total),
+                )
+                for k in range(n)
+            ]
+            _relay_progress(futures, queue, callback, n)
+            return [f.result() for f in futures]
+
+
+def _relay_progress(
+    futures: list[Future[SamplerResult]], queue: Any, callback: Callback, n: int
+) -> None:
+    """Call ``callback`` with the summed progress until every future is done."""
+    progress = [0] * n
+    pending = set(futures)
+    while True:
+        while not queue.empty():
+            chain, iteration = queue.get()
+            progress[chain] = iteration
+            callback(sum(progress))
+        if not pending:
+            break
+        _, pending = wait(pending, timeout=0.2, return_when=FIRST_COMPLETED)
