@@ -6,12 +6,13 @@ example is a virtual experiment with stated truth and noise:
 * Boundary temperatures come from real weather: the Chicago O'Hare TMY3 file
   that ships with EnergyPlus (package ``pyenergyplus-lbnl``), three days of
   warm-up from 12 January, then the 1500 half-hours of the paper. The outside
-  surface temperature of a south-facing wall is the solution of its surface energy balance (convection with h = 4 + 4 v,
-  absorbed solar with absorptance 0.6 on the transposed irradiance from pvlib,
-  long-wave exchange with the sky from the file's horizontal infrared and with
-  the ground at air temperature). The inside face sits in a heated room whose
-  surface temperature wanders slowly around 21 °C (a seeded random walk with
-  0.2 K steps per day, plus a heater cycle of 0.3 K amplitude and 3 h period).
+  surface temperature of a south-facing wall is the solution of its surface
+  energy balance (convection with h = 4 + 4 v, absorbed solar with absorptance
+  0.6 on the transposed irradiance from pvlib, long-wave exchange with the sky
+  from the file's horizontal infrared and with the ground at air temperature).
+  The inside face sits in a heated room whose surface temperature wanders
+  slowly around 21 °C (a seeded random walk with 0.2 K steps per day, plus a
+  heater cycle of 0.3 K amplitude and 3 h period).
 * The "measured" inside heat flux is the simulator's output at the true
   parameters plus Gaussian noise with variance 0.007 (W/m²)², the training MSE
   of the paper's Table 4. ``--truth builtin`` uses bayescal's finite-volume wall,
