@@ -1,0 +1,998 @@
+"""The study file: ``study.toml`` validated into frozen pydantic models.
+
+A study is a folder holding ``study.toml``; relative paths in it start at that
+folder. :func:`load_study` reads the file with :mod:`tomllib`, validates it
+into :class:`Study` and turns every problem into one
+:class:`~bayescal.errors.ConfigError` whose message lists each problem with
+its key path, the value received and what was expected, on one line.
+
+Every field carries a description (with its unit in brackets) and examples;
+the study-file reference is generated from these models. A new simulator type
+is one more class in :data:`SimulatorSection`.
+"""
+
+from __future__ import annotations
+
+import difflib
+import hashlib
+import json
+import os
+import re
+import tomllib
+import types
+from datetime import date, datetime, timedelta, tzinfo
+from pathlib import Path
+from typing import Annotated, Any, Literal, Union, get_args, get_origin
+
+import pandas as pd
+from pydantic import (
+    BaseModel,
+    BeforeValidator,
+    ConfigDict,
+    Field,
+    PrivateAttr,
+    ValidationError,
+    ValidationInfo,
+    field_validator,
+    model_validator,
+)
+from pydantic_core import PydanticCustomError
+
+from bayescal.data.align import format_duration, parse_duration, parse_time_zone
+from bayescal.data.measured import column_problems
+from bayescal.errors import ConfigError
+from bayescal.simulators.fvm import LAYER_PROPERTIES
+
+STUDY_FILE = "study.toml"
+FORMATS = ("csv", "parquet", "epw", "modelica")
+_EXTENSIONS = {".csv": "csv", ".tsv": "csv", ".parquet": "parquet", ".pq": "parquet"}
+_EXTENSIONS |= {".epw": "epw", ".txt": "modelica", ".mos": "modelica"}
+_NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
+
+
+# --------------------------------------------------------------------------- helpers
+
+
+def _f(description: str, *examples: Any, **constraints: Any) -> Any:
+    """A documented field: description (unit in brackets), examples, constraints."""
+    return Field(description=description, examples=list(examples), **constraints)
+
+
+def _duration(value: object) -> timedelta:
+    return parse_duration(value).to_pytimedelta()
+
+
+def _instant(value: object) -> datetime:
+    if isinstance(value, datetime):
+        return value
+    if isinstance(value, date):
+        return datetime(value.year, value.month, value.day)
+    try:
+        if not isinstance(value, str):
+            raise TypeError
+        return pd.Timestamp(value).to_pydatetime()
+    except (ValueError, TypeError):
+        raise ValueError(
+            f"expected a date-time such as '2013-08-21T00:00:00', got {value!r}"
+        ) from None
+
+
+Duration = Annotated[timedelta, BeforeValidator(_duration)]
+"""A duration written with a unit: ``"30min"``, ``"1h"``, ``"1D"``."""
+Instant = Annotated[datetime, BeforeValidator(_instant)]
+"""A date-time; naive values are local times of ``[data].time_zone``."""
+
+
+def _fail(messages: list[str]) -> None:
+    """Raise the collected cross-field problems (each message starts with its key path)."""
+    if messages:
+        raise PydanticCustomError("cross_check", "{text}", {"text": "; ".join(messages)})
+
+
+def _suggest(name: str, valid: list[str] | tuple[str, ...]) -> str:
+    close = difflib.get_close_matches(name, list(valid), n=1)
+    return f"; did you mean {close[0]!r}?" if close else f"; expected one of {', '.join(valid)}"
+
+
+def _resolve(value: Path, info: ValidationInfo, what: str) -> Path:
+    """An absolute path; relative ones start at the study folder and may not leave it."""
+    if str(value) in ("", "."):
+        raise ValueError(f"expected {what}, got {str(value)!r}")
+    if value.is_absolute():
+        return value
+    root = Path(os.path.normpath(Path((info.context or {}).get("root", Path.cwd()))))
+    resolved = Path(os.path.normpath(root / value))
+    if not resolved.is_relative_to(root):
+        raise ValueError(
+            f"path {str(value)!r} leaves the study folder; give an absolute path or move "
+            "it into the study folder"
+        )
+    return resolved
+
+
+class _Section(BaseModel):
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+
+# --------------------------------------------------------------------------- [study], [data]
+
+
+class StudySection(_Section):
+    """``[study]``: name, output folder and master seed."""
+
+    name: str = _f("Name of the study, used in reports.", "paper-wall", min_length=1)
+    output_dir: Path = _f(
+        "Folder for artefacts, relative to the study folder (or absolute).",
+        "out",
+        default=Path("out"),
+        validate_default=True,
+    )
+    seed: int = _f("Master seed; stages without their own seed derive theirs.", 0, default=0, ge=0)
+    description: str = _f("Free text shown in the report.", "Paper wall, 2012", default="")
+
+    @field_validator("output_dir")
+    @classmethod
+    def _inside(cls, value: Path, info: ValidationInfo) -> Path:
+        return _resolve(value, info, "a folder name")
+
+
+class ColumnSpec(_Section):
+    """``[data.columns.<glossary name>]``: where a series comes from and its unit."""
+
+    source: str | int = _f(
+        "Column name (CSV, Parquet, EPW field name) or integer index (Modelica: 1..COLS-1, "
+        "column 0 being time; EPW: field number).",
+        "T_in",
+        14,
+    )
+    unit: str = _f(
+        "Unit in the file; of the glossary quantity's dimension (°F for a temperature is "
+        "fine, kW is not). See bayescal.units.",
+        "degC",
+        "W/m2",
+    )
+    scale: float = _f("Factor applied before unit conversion. [-]", 0.98, default=1.0)
+    sign: Literal[1, -1] = _f(
+        "-1 flips the sign after conversion (a flux measured with the opposite convention).",
+        -1,
+        default=1,
+    )
+
+    @field_validator("source", mode="before")
+    @classmethod
+    def _source(cls, value: object) -> object:
+        if isinstance(value, bool) or not isinstance(value, str | int):
+            raise ValueError(f"expected a column name or an integer index, got {value!r}")
+        return value
+
+
+class DataSection(_Section):
+    """``[data]``: the measured-data file, its clock and its columns."""
+
+    file: Path = _f("Data file, relative to the study folder (or absolute).", "data/wall.csv")
+    format: Literal["csv", "parquet", "epw", "modelica"] = _f(
+        "File format; by default from the extension (.csv/.tsv, .parquet/.pq, .epw, "
+        ".txt/.mos = Modelica CombiTimeTable).",
+        "csv",
+    )
+    time_column: str | None = _f("Timestamp column (csv, parquet: required).", "time", default=None)
+    time_format: str | None = _f(
+        "strftime format of the timestamps (csv, parquet); ISO 8601 if omitted.",
+        "%d/%m/%Y %H:%M",
+        default=None,
+    )
+    time_zone: str = _f(
+        "Zone of naive timestamps and of start, end, epoch: IANA name or fixed offset. The "
+        "clock inside is UTC. Not for EPW (the file has its own).",
+        "UTC+01:00",
+        "Europe/Brussels",
+        default="UTC",
+    )
+    epoch: Instant | None = _f(
+        "Modelica tables: the instant of t = 0 (column 0 is seconds since it).",
+        "2013-01-01T00:00:00",
+        default=None,
+    )
+    table: str | None = _f("Modelica: table name in a file with several.", "data", default=None)
+    delimiter: str = _f("CSV field separator.", ";", default=",", min_length=1, max_length=1)
+    decimal: Literal[".", ","] = _f("CSV decimal mark.", ",", default=".")
+    step: Duration = _f(
+        "Step of the study clock. Finer data are averaged over centred windows "
+        "[t - step/2, t + step/2); coarser data are an error.",
+        "30min",
+        "10min",
+    )
+    max_gap_interpolate: Duration = _f(
+        "Gaps up to this length are interpolated linearly; longer ones are reported and "
+        "their periods dropped. Default: never interpolate.",
+        "1h",
+        default=timedelta(0),
+    )
+    start: Instant | None = _f(
+        "First clock instant: crops the record and fixes the grid (default: the grid is "
+        "anchored at local midnight).",
+        "2013-08-21T00:00:00",
+        default=None,
+    )
+    end: Instant | None = _f("End of the record, exclusive.", "2013-09-30T00:00:00", default=None)
+    columns: dict[str, ColumnSpec] = _f(
+        "Glossary name -> file column. Outputs in [outputs].calibrate are measurements, "
+        "every other column a boundary condition.",
+        {"heat_flux_in": {"source": "q_in", "unit": "W/m2"}},
+        min_length=1,
+    )
+
+    @model_validator(mode="before")
+    @classmethod
+    def _infer_format(cls, data: Any) -> Any:
+        if isinstance(data, dict) and "format" not in data and isinstance(data.get("file"), str):
+            suffix = Path(data["file"]).suffix.lower()
+            if suffix not in _EXTENSIONS:
+                raise ValueError(
+                    f"cannot tell the format of {data['file']!r} from its extension; set "
+                    f"data.format to one of {', '.join(map(repr, FORMATS))}"
+                )
+            return {**data, "format": _EXTENSIONS[suffix]}
+        return data
+
+    @field_validator("file")
+    @classmethod
+    def _file(cls, value: Path, info: ValidationInfo) -> Path:
+        return _resolve(value, info, "a file name")
+
+    @field_validator("time_zone")
+    @classmethod
+    def _zone(cls, value: str) -> str:
+        parse_time_zone(value)
+        return value
+
+    @field_validator("step", "max_gap_interpolate")
+    @classmethod
+    def _not_negative(cls, value: timedelta, info: ValidationInfo) -> timedelta:
+        if value < timedelta(0) or (info.field_name == "step" and not value):
+            raise ValueError(
+                f"must be {'positive' if info.field_name == 'step' else '>= 0'}, "
+                f"got {format_duration(value)}"
+            )
+        return value
+
+    @model_validator(mode="after")
+    def _consistent(self) -> DataSection:
+        problems = self._format_problems()
+        for name, spec in self.columns.items():
+            problems += column_problems(f"data.columns.{name}", name, spec, self.format)
+        _fail(problems)
+        return self
+
+    def _format_problems(self) -> list[str]:
+        fmt, given = self.format, self.model_fields_set
+        problems = []
+        if fmt in ("csv", "parquet") and self.time_column is None:
+            problems.append(f"data.time_column: required for format {fmt!r}")
+        if fmt == "modelica" and self.epoch is None:
+            problems.append("data.epoch: required for Modelica tables (the instant of t = 0)")
+        only = {"time_column": "csv parquet", "time_format": "csv parquet", "delimiter": "csv"}
+        only |= {"decimal": "csv", "epoch": "modelica", "table": "modelica"}
+        for key, formats in only.items():
+            if key in given and fmt not in formats.split():
+                problems.append(
+                    f"data.{key}: only applies to format {formats.replace(' ', ' or ')}"
+                )
+        if fmt == "epw" and "time_zone" in given:
+            problems.append("data.time_zone: EPW files carry their own time zone; remove it")
+        if self.start and self.end and _utc(self.start, self.zone) >= _utc(self.end, self.zone):
+            problems.append(f"data.end: {self.end} is not after data.start {self.start}")
+        if self.delimiter == self.decimal:
+            problems.append(f"data.decimal: {self.decimal!r} is also the delimiter")
+        return problems
+
+    @property
+    def zone(self) -> tzinfo:
+        """The parsed time zone."""
+        return parse_time_zone(self.time_zone)
+
+
+def _utc(value: datetime, zone: tzinfo) -> pd.Timestamp:
+    ts = pd.Timestamp(value)
+    return ts.tz_convert("UTC") if ts.tz is not None else ts.tz_localize(zone).tz_convert("UTC")
+
+
+# --------------------------------------------------------------------------- [simulator]
+
+_KIND_UNITS = {
+    "length": ({"m"}, "m"),
+    "conductivity": ({"W/mK", "W/Km", "Wm-1K-1", "W/m/K"}, "W/(m·K)"),
+    "density": ({"kg/m3", "kgm-3"}, "kg/m³"),
+    "specific_heat": ({"J/kgK", "J/Kkg", "Jkg-1K-1", "J/kg/K"}, "J/(kg·K)"),
+    "resistance": ({"m2K/W", "Km2/W", "m2KW-1"}, "m²·K/W"),
+    "coefficient": ({"W/m2K", "W/Km2", "Wm-2K-1", "W/m2/K"}, "W/(m²·K)"),
+    "wind_coefficient": ({"J/m3K", "J/Km3", "Jm-3K-1", "Ws/m3K"}, "J/(m³·K)"),
+    "capacity": ({"J/K", "JK-1"}, "J/K"),
+    "conductance": ({"W/K", "WK-1"}, "W/K"),
+    "dimensionless": ({"1", "-", "fraction"}, "1"),
+}
+"""Kind of a calibration target -> (accepted unit spellings, normalised; the SI unit)."""
+
+
+def _normal_unit(unit: str) -> str:
+    return re.sub(r"[\s·.*()^]", "", unit.replace("²", "2").replace("³", "3"))
+
+
+class _SimulatorBase(_Section):
+    """What every simulator section tells the rest of the configuration."""
+
+    def target_kinds(self) -> dict[str, str] | None:
+        """Calibratable target -> kind (see ``_KIND_UNITS``); None accepts any target."""
+        return None
+
+    def output_names(self) -> tuple[str, ...]:
+        """Series the simulator produces (empty: not known before it runs)."""
+        return ()
+
+    def input_names(self) -> tuple[str, ...]:
+        """Boundary conditions the simulator cannot run without."""
+        return ()
+
+
+class LayerSpec(_Section):
+    """One layer of a wall, outside to inside."""
+
+    name: str = _f("Layer name, used in targets.", "concrete")
+    thickness: float = _f("Thickness. [m]", 0.15, gt=0)
+    conductivity: float = _f("Thermal conductivity. [W/(m·K)]", 0.12, gt=0)
+    density: float = _f("Density. [kg/m³]", 552.0, gt=0)
+    specific_heat: float = _f("Specific heat capacity. [J/(kg·K)]", 800.0, gt=0)
+
+    @field_validator("name")
+    @classmethod
+    def _name(cls, value: str) -> str:
+        if not _NAME.match(value):
+            raise ValueError(f"layer names are identifiers (letters, digits, _), got {value!r}")
+        return value
+
+
+class WallSimulator(_SimulatorBase):
+    """``type = "wall"``: the built-in wall (:class:`bayescal.simulators.wall.MultilayerWall`)."""
+
+    type: Literal["wall"] = _f("Simulator type.", "wall")
+    layers: list[LayerSpec] = _f(
+        "Layers from the outside face to the inside face ([[simulator.layers]] tables).",
+        [
+            {
+                "name": "concrete",
+                "thickness": 0.15,
+                "conductivity": 0.12,
+                "density": 552.0,
+                "specific_heat": 800.0,
+            }
+        ],
+        min_length=1,
+    )
+    boundary: Literal["surface", "air"] = _f(
+        "'surface': measured surface temperatures imposed on both faces; 'air': air "
+        "temperatures through the surface resistances, plus absorbed solar outside.",
+        "air",
+        default="surface",
+    )
+    r_se: float = _f(
+        "Outside surface resistance (air boundary). [m²·K/W]", 0.04, default=0.04, gt=0
+    )
+    r_si: float = _f("Inside surface resistance (air boundary). [m²·K/W]", 0.13, default=0.13, gt=0)
+    solar_absorptance: float = _f(
+        "Solar absorptance of the outside face; > 0 needs boundary 'air' and the boundary "
+        "condition poa_global_out. [-]",
+        0.6,
+        default=0.0,
+        ge=0,
+        le=1,
+    )
+    outputs: list[str] = _f(
+        "Series produced: heat_flux_in, heat_flux_out, temp_surf_out, temp_surf_in, and "
+        "temp_interface_<i> / heat_flux_interface_<i> at the interface between layers i-1 "
+        "and i (outside layer 0).",
+        ["heat_flux_in", "temp_interface_2"],
+        default=["heat_flux_in"],
+        min_length=1,
+    )
+    scheme: Literal["crank-nicolson", "backward-euler", "exact"] = _f(
+        "Time integration scheme.", "exact", default="crank-nicolson"
+    )
+    tolerance: float = _f(
+        "Relative error bound of the periodic response down to the period of two clock "
+        "steps; it chooses mesh and sub-steps. [-]",
+        1e-3,
+        default=1e-2,
+        gt=0,
+        le=0.25,
+    )
+    cells: list[int] | None = _f("Cells per layer, overriding tolerance.", [4, 10, 4], default=None)
+
+    @model_validator(mode="after")
+    def _consistent(self) -> WallSimulator:
+        from bayescal.simulators.wall import allowed_outputs
+
+        names = [layer.name for layer in self.layers]
+        allowed = allowed_outputs(len(names))
+        problems = [
+            f"simulator.outputs: {out!r} is not a wall output{_suggest(out, allowed)}"
+            for out in self.outputs
+            if out not in allowed
+        ]
+        if len(set(names)) != len(names):
+            problems.append(f"simulator.layers: layer names must be unique, got {names}")
+        if len(set(self.outputs)) != len(self.outputs):
+            problems.append(f"simulator.outputs: repeated names in {self.outputs}")
+        if self.boundary == "surface" and self.solar_absorptance > 0:
+            problems.append(
+                "simulator.solar_absorptance: > 0 needs boundary = 'air' (imposed surface "
+                "temperatures already contain the solar gains)"
+            )
+        if self.cells is not None and (len(self.cells) != len(names) or min(self.cells) < 1):
+            problems.append(f"simulator.cells: one count >= 1 per layer, got {self.cells}")
+        _fail(problems)
+        return self
+
+    def target_kinds(self) -> dict[str, str]:
+        kinds = {"thickness": "length"} | {p: p for p in LAYER_PROPERTIES if p != "thickness"}
+        found = {f"{layer.name}.{p}": kinds[p] for layer in self.layers for p in LAYER_PROPERTIES}
+        if self.boundary == "air":  # surface resistances and solar act only with air boundaries
+            found |= {"r_si": "resistance", "r_se": "resistance"}
+            found["solar_absorptance"] = "dimensionless"
+        return found
+
+    def output_names(self) -> tuple[str, ...]:
+        return tuple(self.outputs)
+
+    def input_names(self) -> tuple[str, ...]:
+        if self.boundary == "surface":
+            return ("temp_surf_out", "temp_surf_in")
+        solar = ("poa_global_out",) if self.solar_absorptance > 0 else ()
+        return ("temp_air_out", "temp_air_in", *solar)
+
+
+_BOX_KINDS = {"k_wall": "conductivity", "d_wall": "density", "c_wall": "specific_heat"}
+_BOX_KINDS |= {"r_ag": "resistance", "r_glass": "resistance", "c_internal": "capacity"}
+_BOX_KINDS |= {name: "length" for name in ("thickness", "side", "glazed_side")}
+_BOX_KINDS |= {f"h_in_{s}": "coefficient" for s in ("wall", "ceiling", "floor")}
+_BOX_KINDS |= {"h_out_a": "coefficient", "h_out_b": "wind_coefficient", "ua_leak": "conductance"}
+"""Kinds of the box constants; the others (t_w, emissivities, absorptivity, albedo) are [-]."""
+
+
+class BoxSimulator(_SimulatorBase):
+    """``type = "box"``: the built-in test box (:class:`bayescal.simulators.box.TestBox`)."""
+
+    type: Literal["box"] = _f("Simulator type.", "box")
+    mode: Literal["coheating", "freefloat"] = _f(
+        "'coheating': indoor air temperature imposed, heating power computed; 'freefloat': "
+        "indoor air temperature computed (heat_input optional).",
+        "coheating",
+    )
+    latitude: float = _f("Site latitude, north positive. [°]", 50.69, ge=-90, le=90)
+    longitude: float = _f("Site longitude, east positive. [°]", 4.53, ge=-180, le=180)
+    altitude: float = _f("Site altitude. [m]", 100.0, default=0.0)
+    window_azimuth: float = _f(
+        "Azimuth the window faces, clockwise from north (180 = south). [°]",
+        180.0,
+        default=180.0,
+        ge=0,
+        lt=360,
+    )
+    constants: dict[str, float] = _f(
+        "Values overriding the box's nominal constants (bayescal.simulators.box.DEFAULTS: "
+        "k_wall [W/(m·K)], d_wall [kg/m³], c_wall [J/(kg·K)], r_ag [m²·K/W], t_w [-], "
+        "emissivity [-], absorptivity [-], geometry and surface coefficients).",
+        {"c_wall": 800.0, "emissivity": 0.85},
+        default_factory=dict,
+    )
+    cells: int = _f("Finite-volume cells across the wall.", 20, default=20, ge=1)
+    max_step: float = _f("Longest time step. [s]", 600.0, default=600.0, gt=0)
+    sky_model: Literal["isotropic", "haydavies", "perez"] = _f(
+        "Sky-diffuse transposition model.", "perez", default="haydavies"
+    )
+
+    @field_validator("constants")
+    @classmethod
+    def _known_constants(cls, value: dict[str, float]) -> dict[str, float]:
+        from bayescal.simulators.box import DEFAULTS
+
+        for name in value:
+            if name not in DEFAULTS:
+                raise ValueError(f"{name!r} is not a box constant{_suggest(name, list(DEFAULTS))}")
+        return value
+
+    def target_kinds(self) -> dict[str, str]:
+        from bayescal.simulators.box import DEFAULTS
+
+        return {name: _BOX_KINDS.get(name, "dimensionless") for name in DEFAULTS}
+
+    def output_names(self) -> tuple[str, ...]:
+        return ("heating_power",) if self.mode == "coheating" else ("temp_air_in",)
+
+    def input_names(self) -> tuple[str, ...]:
+        control = ("temp_air_in",) if self.mode == "coheating" else ()
+        return ("temp_air_out", "ghi", "dhi", "wind_speed", *control)
+
+
+SimulatorSection = Annotated[Union[WallSimulator, BoxSimulator], Field(discriminator="type")]  # noqa: UP007
+"""The simulator union; a new simulator type is one more class here."""
+
+
+# --------------------------------------------------------------------------- [parameters]
+
+
+class UniformPrior(_Section):
+    """Uniform prior on ``[lower, upper]``."""
+
+    distribution: Literal["uniform"] = _f("Prior family.", "uniform")
+    lower: float = _f("Lower bound, in the parameter's unit.", 0.08)
+    upper: float = _f("Upper bound, in the parameter's unit.", 0.16)
+
+    @model_validator(mode="after")
+    def _bounds(self) -> UniformPrior:
+        if not self.lower < self.upper:
+            raise ValueError(f"lower bound {self.lower} >= upper bound {self.upper}")
+        return self
+
+
+class BetaPrior(UniformPrior):
+    """Beta(a, b) prior stretched over ``[lower, upper]``."""
+
+    distribution: Literal["beta"] = _f("Prior family.", "beta")  # type: ignore[assignment]
+    a: float = _f("First shape parameter. [-]", 1.0, gt=0)
+    b: float = _f("Second shape parameter. [-]", 2.0, gt=0)
+
+
+Prior = Annotated[Union[UniformPrior, BetaPrior], Field(discriminator="distribution")]  # noqa: UP007
+
+
+class Parameter(_Section):
+    """``[parameters.<name>]``: one calibration parameter."""
+
+    unit: str = _f("Unit of nominal and bounds: the SI unit of the targets.", "W/(m·K)", "1")
+    nominal: float = _f("Nominal (catalogue) value, inside the bounds.", 0.12)
+    prior: Prior = _f(
+        "Prior: {distribution = 'uniform', lower, upper} or {distribution = 'beta', lower, "
+        "upper, a, b}.",
+        {"distribution": "uniform", "lower": 0.08, "upper": 0.16},
+    )
+    targets: list[str] = _f(
+        "What the value sets: 'layer.property' or r_si, r_se, solar_absorptance (wall); a "
+        "constant name (box). Several targets share one value.",
+        ["concrete.conductivity"],
+        ["board_out.specific_heat", "board_in.specific_heat"],
+        min_length=1,
+    )
+    description: str = _f("Text for reports.", "conductivity of the blocks", default="")
+
+    @model_validator(mode="after")
+    def _nominal_inside(self) -> Parameter:
+        lower, upper = self.prior.lower, self.prior.upper
+        if not lower <= self.nominal <= upper:
+            raise ValueError(
+                f"nominal {self.nominal} is outside the prior bounds [{lower}, {upper}]"
+            )
+        return self
+
+
+# --------------------------------------------------------------------------- other sections
+
+
+class OutputsSection(_Section):
+    """``[outputs]``: the measured outputs to calibrate on."""
+
+    calibrate: list[str] = _f(
+        "Glossary names of measured outputs, mapped in [data.columns] and produced by the "
+        "simulator.",
+        ["heat_flux_in"],
+        min_length=1,
+    )
+
+
+def _length(value: object) -> object:
+    if isinstance(value, int) and not isinstance(value, bool):
+        if value < 2:
+            raise ValueError(f"a period needs at least 2 samples, got {value}")
+        return value
+    return _duration(value)
+
+
+class PeriodsSection(_Section):
+    """``[periods]``: warm-up, period length and the held-out test window (give one of
+    ``test_samples`` and ``test_fraction``)."""
+
+    length: Annotated[timedelta | int, BeforeValidator(_length)] = _f(
+        "Period length: a duration (multiple of data.step) or a number of samples.",
+        "1D",
+        48,
+        default=timedelta(days=1),
+    )
+    warmup: Duration = _f(
+        "Stretch at the start that is simulated but not compared (initial conditions); a "
+        "multiple of data.step.",
+        "1D",
+        "0min",
+        default=timedelta(days=1),
+    )
+    test_samples: int | None = _f("Test window at the end, in samples.", 300, default=None, ge=0)
+    test_fraction: float | None = _f(
+        "Test window at the end, as a fraction of the record.", 0.2, default=None, ge=0, lt=1
+    )
+
+    @model_validator(mode="after")
+    def _one_test(self) -> PeriodsSection:
+        if (self.test_samples is None) == (self.test_fraction is None):
+            both = self.test_samples is not None
+            raise ValueError(
+                "give exactly one of test_samples and test_fraction, got "
+                + (f"both ({self.test_samples}, {self.test_fraction})" if both else "neither")
+            )
+        if self.warmup < timedelta(0):
+            raise ValueError(f"warmup must not be negative, got {self.warmup}")
+        return self
+
+
+class DesignSection(_Section):
+    """``[design]``: the Latin hypercube of simulator runs."""
+
+    runs: int = _f("Number of runs R (at least parameters + 2).", 30, default=30, ge=2)
+    seed: int | None = _f("Seed; derived from [study].seed if omitted.", 1, default=None, ge=0)
+    optimization: Literal["none", "random-cd", "lloyd"] = _f(
+        "Space-filling optimisation of scipy.stats.qmc.LatinHypercube.", "none", default="random-cd"
+    )
+
+
+class EmulatorSection(_Section):
+    """``[emulator]``: PCA bases and GP hyperparameters."""
+
+    pca_variance: float = _f(
+        "Output PCA: keep components up to this variance fraction (or pca_components).",
+        0.95,
+        default=0.90,
+        gt=0,
+        le=1,
+    )
+    pca_components: int | None = _f(
+        "Output PCA: fixed number of components.", 3, default=None, ge=1
+    )
+    input_pca_variance: float = _f(
+        "Boundary-condition PCA: variance fraction kept per series.", 0.9, default=0.90, gt=0, le=1
+    )
+    burn: int = _f("Hyperparameter MCMC burn-in iterations.", 1000, default=1000, ge=0)
+    samples: int = _f("Hyperparameter MCMC iterations kept.", 2000, default=2000, ge=1)
+    algebra: Literal["kronecker", "dense"] = _f(
+        "Linear algebra: fast Kronecker or the dense reference.", "dense", default="kronecker"
+    )
+
+    @model_validator(mode="after")
+    def _one_rule(self) -> EmulatorSection:
+        if self.pca_components is not None and "pca_variance" in self.model_fields_set:
+            raise ValueError("give pca_variance or pca_components, not both")
+        return self
+
+
+class CalibrationSection(_Section):
+    """``[calibration]``: MCMC for theta* and the precisions."""
+
+    chains: int = _f("Independent chains (>= 4 for R-hat).", 4, default=4, ge=4)
+    burn: int = _f("Burn-in iterations per chain.", 2000, default=2000, ge=0)
+    samples: int = _f("Iterations kept per chain.", 5000, default=5000, ge=1)
+    seed: int | None = _f("Seed; derived from [study].seed if omitted.", 2, default=None, ge=0)
+
+
+class DiscrepancySection(_Section):
+    """``[discrepancy]``: the difference process Delta(x) (the paper's eqs. 18–25)."""
+
+    enabled: bool = _f("Estimate Delta(x).", True, default=False)
+    realisations: int = _f("Posterior realisations b per update.", 50, default=50, ge=2)
+    update_interval: int = _f("MCMC iterations between updates.", 100, default=100, ge=1)
+
+
+class RunnerSection(_Section):
+    """``[runner]``: where simulator runs execute."""
+
+    backend: Literal["serial", "processes", "dask"] = _f(
+        "Execution backend.", "dask", default="processes"
+    )
+    jobs: int | None = _f("Parallel workers; all cores if omitted.", 4, default=None, ge=1)
+    scheduler: str | None = _f(
+        "Dask scheduler address (dask only); a LocalCluster if omitted.",
+        "tcp://10.0.0.5:8786",
+        default=None,
+    )
+    timeout: float | None = _f("Time limit per run. [s]", 600.0, default=None, gt=0)
+    retries: int = _f("Retries of a failed run.", 1, default=0, ge=0)
+
+    @model_validator(mode="after")
+    def _scheduler_for_dask(self) -> RunnerSection:
+        if self.scheduler is not None and self.backend != "dask":
+            raise ValueError(f"scheduler applies to backend 'dask', not {self.backend!r}")
+        return self
+
+
+# --------------------------------------------------------------------------- the study
+
+
+class Study(_Section):
+    """A validated study file; build it with :func:`load_study`.
+
+    ``data.file`` and ``study.output_dir`` are absolute (relative ones were
+    resolved against the study folder :attr:`root`); :attr:`path` is the file.
+    """
+
+    study: StudySection = _f("Name, output folder and seed.")
+    data: DataSection = _f("Measured data.")
+    simulator: SimulatorSection = _f("The simulator and its fixed inputs.")
+    parameters: dict[str, Parameter] = _f("Calibration parameters by name (at least one).")
+    outputs: OutputsSection = _f("Measured outputs to calibrate on.")
+    periods: PeriodsSection = _f("Warm-up, periods and test window.")
+    design: DesignSection = _f("Latin hypercube.", default_factory=DesignSection)
+    emulator: EmulatorSection = _f("Emulator.", default_factory=EmulatorSection)
+    calibration: CalibrationSection = _f("Calibration MCMC.", default_factory=CalibrationSection)
+    discrepancy: DiscrepancySection = _f("Difference process.", default_factory=DiscrepancySection)
+    runner: RunnerSection = _f("Simulation runner.", default_factory=RunnerSection)
+
+    _root: Path = PrivateAttr(default_factory=Path.cwd)
+    _path: Path | None = PrivateAttr(default=None)
+
+    @property
+    def root(self) -> Path:
+        """The study folder."""
+        return self._root
+
+    @property
+    def path(self) -> Path:
+        """The study file (``root / "study.toml"`` for a study built in code)."""
+        return self._path if self._path is not None else self._root / STUDY_FILE
+
+    @property
+    def boundary_conditions(self) -> tuple[str, ...]:
+        """Mapped columns that are not calibrated outputs."""
+        return tuple(n for n in self.data.columns if n not in self.outputs.calibrate)
+
+    @field_validator("parameters")
+    @classmethod
+    def _parameter_names(cls, value: dict[str, Parameter]) -> dict[str, Parameter]:
+        if not value:
+            raise ValueError("no parameters; define at least one [parameters.<name>] table")
+        bad = [name for name in value if not _NAME.match(name)]
+        if bad:
+            raise ValueError(f"parameter names are identifiers (letters, digits, _), got {bad}")
+        return value
+
+    @model_validator(mode="after")
+    def _cross_checks(self) -> Study:
+        problems = _target_problems(self) + _output_problems(self) + _period_problems(self)
+        if self.design.runs < len(self.parameters) + 2:
+            problems.append(
+                f"design.runs: {self.design.runs} runs for {len(self.parameters)} parameters; "
+                f"at least {len(self.parameters) + 2} are needed"
+            )
+        _fail(problems)
+        return self
+
+    def config_hash(self) -> str:
+        """SHA-256 (hex) of the canonical JSON of the validated configuration.
+
+        Paths inside the study folder enter relative to it, so moving the
+        folder keeps the hash; changing any value changes it.
+        """
+        dumped = self.model_dump(mode="json")
+        for section, key in (("data", "file"), ("study", "output_dir")):
+            path = Path(dumped[section][key])
+            if path.is_relative_to(self.root):
+                dumped[section][key] = path.relative_to(self.root).as_posix()
+        text = json.dumps(dumped, sort_keys=True, separators=(",", ":"), ensure_ascii=False)
+        return hashlib.sha256(text.encode()).hexdigest()
+
+
+def _target_problems(study: Study) -> list[str]:
+    kinds = study.simulator.target_kinds()
+    problems: list[str] = []
+    owner: dict[str, str] = {}
+    for name, parameter in study.parameters.items():
+        key = f"parameters.{name}"
+        for target in parameter.targets:
+            if target in owner:
+                problems.append(f"{key}.targets: {target!r} is already set by {owner[target]!r}")
+            owner[target] = name
+            if kinds is not None and target not in kinds:
+                problems.append(
+                    f"{key}.targets: {target!r} is not a target of the {study.simulator.type} "
+                    f"simulator{_suggest(target, sorted(kinds))}"
+                )
+        found = sorted({kinds[t] for t in parameter.targets if t in kinds} if kinds else set())
+        if len(found) > 1:
+            problems.append(f"{key}.targets: mixes quantities of different kinds {found}")
+        elif found and _normal_unit(parameter.unit) not in _KIND_UNITS[found[0]][0]:
+            problems.append(
+                f"{key}.unit: {parameter.unit!r} is not the unit of its targets "
+                f"({found[0].replace('_', ' ')}); write values in {_KIND_UNITS[found[0]][1]!r}"
+            )
+    return problems
+
+
+def _output_problems(study: Study) -> list[str]:
+    problems = []
+    produced, sim = study.simulator.output_names(), study.simulator.type
+    for name in study.outputs.calibrate:
+        if name not in study.data.columns:
+            problems.append(
+                f"outputs.calibrate: {name!r} is not mapped in [data.columns] (mapped: "
+                f"{', '.join(study.data.columns)})"
+            )
+        if produced and name not in produced:
+            problems.append(
+                f"outputs.calibrate: the {sim} simulator does not produce {name!r}; it "
+                f"produces {', '.join(produced)}"
+            )
+    for name in study.simulator.input_names():
+        if name not in study.data.columns:
+            problems.append(
+                f"data.columns: the {sim} simulator needs the boundary condition {name!r}; "
+                "map it to a column of the file"
+            )
+        elif name in study.outputs.calibrate:
+            problems.append(f"outputs.calibrate: {name!r} is an input of the {sim} simulator")
+    return problems
+
+
+def _period_problems(study: Study) -> list[str]:
+    step, periods = study.data.step, study.periods
+    checks = {"periods.warmup": periods.warmup}
+    if isinstance(periods.length, timedelta):
+        checks["periods.length"] = periods.length
+    problems = [
+        f"{key}: {format_duration(value)} is not a multiple of data.step {format_duration(step)}"
+        for key, value in checks.items()
+        if value % step
+    ]
+    if isinstance(periods.length, timedelta) and periods.length < 2 * step:
+        problems.append(f"periods.length: {format_duration(periods.length)} is under 2 steps")
+    return problems
+
+
+# --------------------------------------------------------------------------- loading
+
+
+def load_study(path: str | os.PathLike[str]) -> Study:
+    """Read and validate a study.
+
+    Parameters
+    ----------
+    path
+        ``study.toml`` or the folder holding it.
+
+    Raises
+    ------
+    ConfigError
+        For a missing file, a TOML syntax error (with its line) or any invalid
+        value; the message lists every problem found, on one line.
+    """
+    given = Path(path)
+    file = given / STUDY_FILE if given.is_dir() else given
+    if not file.is_file():
+        what = f"no {STUDY_FILE} in folder {given}" if given.is_dir() else "file not found"
+        raise ConfigError(what, hint="give the study file or its folder", source=str(file))
+    try:
+        raw = tomllib.loads(file.read_bytes().decode("utf-8"))
+    except UnicodeDecodeError as exc:
+        raise ConfigError(f"not UTF-8 text (byte {exc.start})", source=str(file)) from None
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"invalid TOML: {exc}", source=str(file)) from None
+    study = study_from_dict(raw, root=file.resolve().parent, source=str(file))
+    study._path = file.resolve()
+    return study
+
+
+def study_from_dict(raw: dict[str, Any], *, root: Path, source: str = STUDY_FILE) -> Study:
+    """Validate the parsed content of a study file.
+
+    Parameters
+    ----------
+    raw
+        The parsed TOML.
+    root
+        Folder that relative paths start from.
+    source
+        Name used in error messages.
+    """
+    try:
+        study = Study.model_validate(raw, context={"root": Path(root)})
+    except ValidationError as exc:
+        raise ConfigError("; ".join(format_errors(exc)), source=source) from None
+    study._root = Path(root)
+    return study
+
+
+# --------------------------------------------------------------------------- error messages
+
+_TYPE_LABELS = frozenset({"str", "int", "float", "bool", "timedelta", "datetime", "none"})
+
+
+def _members(node: Any) -> list[Any]:
+    if get_origin(node) in (Union, types.UnionType):
+        return [m for m in get_args(node) if m is not type(None)]
+    return [node]
+
+
+def _tag_of(member: Any) -> tuple[Any, ...]:
+    """Literal values of a union member's discriminator field (``("wall",)``)."""
+    if isinstance(member, type) and issubclass(member, BaseModel):
+        for field in member.model_fields.values():
+            if get_origin(field.annotation) is Literal:
+                return get_args(field.annotation)
+    return ()
+
+
+def _walk(loc: tuple[int | str, ...]) -> tuple[list[int | str], Any]:
+    """The key path shown for an error location, and the type found there.
+
+    Union branch labels that pydantic inserts (``"wall"``, ``"int"``) are skipped.
+    """
+    node: Any = Study
+    shown: list[int | str] = []
+    for part in loc:
+        members = _members(node)
+        if len(members) > 1:
+            tagged = [m for m in members if part in _tag_of(m)]
+            if tagged or (isinstance(part, str) and (part in _TYPE_LABELS or "[" in part)):
+                node = tagged[0] if tagged else None
+                continue
+        node = members[0]
+        shown.append(part)
+        if isinstance(node, type) and issubclass(node, BaseModel):
+            field = node.model_fields.get(str(part))
+            node = field.annotation if field is not None else None
+        elif get_origin(node) in (dict, list):
+            node = get_args(node)[-1]
+        else:
+            node = None
+    return shown, node
+
+
+def _join(parts: list[int | str]) -> str:
+    text = ""
+    for part in parts:
+        text += f"[{part}]" if isinstance(part, int) else (f".{part}" if text else str(part))
+    return text
+
+
+def _unknown_key(loc: tuple[int | str, ...]) -> str:
+    shown, parent = _walk(loc[:-1])
+    full = _join([*shown, loc[-1]])
+    if not (isinstance(parent, type) and issubclass(parent, BaseModel)):
+        return f"unknown key {full!r}"
+    valid = list(parent.model_fields)
+    close = difflib.get_close_matches(str(loc[-1]), valid, n=1)
+    if close:
+        return f"unknown key {full!r}; did you mean {_join([*shown, close[0]])!r}?"
+    return f"unknown key {full!r}; valid keys here: {', '.join(valid)}"
+
+
+def format_errors(exc: ValidationError) -> list[str]:
+    """One message per pydantic error: key path, value received, what was expected."""
+    messages: list[str] = []
+    for err in exc.errors(include_url=False):
+        loc, kind, ctx = tuple(err["loc"]), err["type"], err.get("ctx") or {}
+        shown, node = _walk(loc)
+        path = _join(shown)
+        if kind == "cross_check":  # messages carry their own full key paths
+            message = str(ctx["text"])
+        elif kind == "extra_forbidden":
+            message = _unknown_key(loc)
+        elif kind == "missing":
+            message = f"{path}: missing required key"
+        elif kind in ("union_tag_not_found", "union_tag_invalid"):
+            key = str(ctx.get("discriminator", "")).strip("'")
+            tags = ", ".join(repr(t) for m in _members(node) for t in _tag_of(m))
+            got = f"unknown value {ctx['tag']!r}" if "tag" in ctx else "missing"
+            message = f"{_join([*shown, key])}: {got}; expected one of {tags}"
+        else:
+            text = str(err["msg"]).removeprefix("Value error, ")
+            text = text[:1].lower() + text[1:]
+            if kind != "value_error" and not isinstance(err.get("input"), dict | list):
+                text += f", got {err.get('input')!r}"
+            message = f"{path}: {text}" if path else text
+        if message not in messages:
+            messages.append(message)
+    return messages

@@ -1,0 +1,311 @@
+"""A study's measured data: read, rename, convert, align, report gaps.
+
+:func:`load_measured` turns ``[data]`` of a validated study into
+:class:`MeasuredData`: the boundary conditions as a
+:class:`~bayescal.simulators.base.Forcing` on the study clock, the measured
+outputs to calibrate on, the clock and the list of gaps. Columns listed in
+``[outputs].calibrate`` are outputs; every other mapped column is a boundary
+condition.
+"""
+
+from __future__ import annotations
+
+import difflib
+import re
+from collections.abc import Mapping
+from dataclasses import dataclass
+from datetime import timedelta, tzinfo
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+import pandas as pd
+
+from bayescal.data.align import Gap, align, fill_gaps, format_duration
+from bayescal.data.readers import (
+    EPW_FIELDS,
+    epw_field,
+    read_csv,
+    read_epw,
+    read_modelica_table,
+    read_parquet,
+)
+from bayescal.errors import DataError
+from bayescal.glossary import GLOSSARY, Quantity
+from bayescal.periods import PeriodLayout, layout_periods
+from bayescal.simulators.base import Forcing
+from bayescal.units import dimension_of, to_internal
+
+if TYPE_CHECKING:
+    from bayescal.config import ColumnSpec, DataSection, PeriodsSection, Study
+
+
+@dataclass(frozen=True)
+class MeasuredData:
+    """Measured series of a study on its clock, in internal units.
+
+    Attributes
+    ----------
+    forcing
+        Boundary conditions (glossary names), finite everywhere.
+    outputs
+        Measured outputs to calibrate on, glossary name -> shape ``(n,)``,
+        NaN where missing.
+    times
+        Clock instants, UTC ``datetime64[s]``, shape ``(n,)``.
+    step
+        Clock step. [s]
+    gaps
+        Every gap found, interpolated or left missing, in time order.
+    layout
+        Warm-up, training periods and test window.
+    source
+        The data file.
+    """
+
+    forcing: Forcing
+    outputs: Mapping[str, np.ndarray]
+    times: np.ndarray
+    step: float
+    gaps: tuple[Gap, ...]
+    layout: PeriodLayout
+    source: Path
+
+    @property
+    def n(self) -> int:
+        """Number of samples on the clock."""
+        return int(self.times.size)
+
+    @property
+    def gap_report(self) -> tuple[Gap, ...]:
+        """Alias of :attr:`gaps`."""
+        return self.gaps
+
+    def missing(self) -> np.ndarray:
+        """Samples where any calibrated output is missing, shape ``(n,)``."""
+        return _missing(self.outputs, self.n)
+
+
+def _missing(outputs: Mapping[str, np.ndarray], n: int) -> np.ndarray:
+    mask = np.zeros(n, dtype=bool)
+    for values in outputs.values():
+        mask |= ~np.isfinite(values)
+    return mask
+
+
+_INDEXED = re.compile(r"^(?P<base>\w+_interface)_(?P<index>\d+)$")
+
+
+def glossary_quantity(name: str) -> Quantity | None:
+    """The glossary entry of a series name, or None.
+
+    Interface series of walls carry the interface index: ``temp_interface_2``
+    is a ``temp_interface`` (the interface between layers 1 and 2).
+    """
+    if name in GLOSSARY:
+        return GLOSSARY[name]
+    match = _INDEXED.match(name)
+    return GLOSSARY.get(match["base"]) if match else None
+
+
+def column_problems(key: str, name: str, spec: ColumnSpec, fmt: str) -> list[str]:
+    """Problems of one ``[data.columns.<name>]`` entry, each prefixed with its key path.
+
+    Checks that ``name`` is a glossary name, that the unit is of its dimension
+    and that the source suits the file format.
+    """
+    quantity = glossary_quantity(name)
+    if quantity is None:
+        close = difflib.get_close_matches(name, list(GLOSSARY), n=1)
+        hint = f"did you mean {close[0]!r}?" if close else "see bayescal.glossary"
+        return [f"{key}: {name!r} is not a glossary name; {hint}"]
+    problems = []
+    try:
+        found = dimension_of(spec.unit)
+    except DataError as exc:
+        found = None
+        problems.append(f"{key}.unit: {exc.one_line()}")
+    if found is not None and found != quantity.dimension:
+        problems.append(
+            f"{key}.unit: {spec.unit!r} is a {found.replace('_', ' ')} unit, {name} is a "
+            f"{quantity.dimension.replace('_', ' ')}"
+        )
+    if spec.sign == -1 and quantity.dimension == "temperature":
+        problems.append(f"{key}.sign: -1 on a temperature makes no sense (fluxes, powers only)")
+    return problems + _source_problems(key, spec.source, fmt)
+
+
+def _source_problems(key: str, source: str | int, fmt: str) -> list[str]:
+    if fmt == "modelica" and (not isinstance(source, int) or source < 1):
+        return [
+            f"{key}.source: Modelica tables need a column index >= 1 (0 is time), got {source!r}"
+        ]
+    if fmt in ("csv", "parquet") and not isinstance(source, str):
+        return [f"{key}.source: give the column name for format {fmt!r}, got {source!r}"]
+    names = EPW_FIELDS[6:]
+    if fmt == "epw" and isinstance(source, int) and not 6 <= source < len(EPW_FIELDS):
+        return [
+            f"{key}.source: EPW data fields are numbered 6..{len(EPW_FIELDS) - 1}, got {source}"
+        ]
+    if fmt == "epw" and isinstance(source, str) and source not in names:
+        close = difflib.get_close_matches(source, names, n=1)
+        hint = f"did you mean {close[0]!r}?" if close else f"EPW fields: {', '.join(names)}"
+        return [f"{key}.source: {source!r} is not an EPW field; {hint}"]
+    return []
+
+
+def _read(data: DataSection, sources: list[str | int]) -> tuple[pd.DataFrame, tzinfo]:
+    """The mapped source columns, and the zone of local times (the EPW file's own)."""
+    zone = data.zone
+    if data.format == "csv":
+        frame = read_csv(
+            data.file,
+            str(data.time_column),
+            time_format=data.time_format,
+            time_zone=zone,
+            delimiter=data.delimiter,
+            decimal=data.decimal,
+            columns=[str(s) for s in sources],
+        )
+    elif data.format == "parquet":
+        frame = read_parquet(
+            data.file,
+            str(data.time_column),
+            time_format=data.time_format,
+            time_zone=zone,
+            columns=[str(s) for s in sources],
+        )
+    elif data.format == "epw":
+        weather = read_epw(data.file)
+        zone = weather.attrs["time_zone"]
+        frame = weather[[epw_field(s) for s in sources]].set_axis(sources, axis=1)
+    elif data.epoch is None:  # pragma: no cover - the config requires it
+        raise DataError("data.epoch is required for Modelica tables")
+    else:
+        columns = [int(s) for s in sources]
+        frame = read_modelica_table(
+            data.file, data.epoch, time_zone=zone, table=data.table, columns=columns
+        )
+    return frame, zone
+
+
+def _convert(raw: pd.DataFrame, data: DataSection) -> pd.DataFrame:
+    """Rename source columns to glossary names and convert to internal units."""
+    out = {}
+    for name, spec in data.columns.items():
+        values = np.asarray(raw[spec.source], dtype=float) * spec.scale
+        try:
+            quantity = glossary_quantity(name)
+            dimension = None if quantity is None else quantity.dimension
+            out[name] = to_internal(values, spec.unit, dimension=dimension) * spec.sign
+        except DataError as exc:  # pragma: no cover - the config checks units first
+            raise DataError(exc.message, hint=exc.hint, source=f"data.columns.{name}") from None
+    return pd.DataFrame(out, index=raw.index)
+
+
+def _samples(value: timedelta | int, step: pd.Timedelta) -> int:
+    if isinstance(value, int):
+        return value
+    return int(pd.Timedelta(value) // step)
+
+
+def layout_for(
+    n_samples: int, step: pd.Timedelta, periods: PeriodsSection, missing: np.ndarray | None = None
+) -> PeriodLayout:
+    """Lay out a study's periods on a record of ``n_samples`` samples.
+
+    Parameters
+    ----------
+    n_samples
+        Samples on the clock.
+    step
+        Clock step.
+    periods
+        The study's ``[periods]``.
+    missing
+        Samples whose measured output is missing (their periods are dropped).
+
+    Raises
+    ------
+    DataError
+        If the record is shorter than warm-up + one period + test window.
+    """
+    if periods.test_samples is not None:
+        test = periods.test_samples
+    else:
+        test = round(float(periods.test_fraction or 0.0) * n_samples)
+    length, warmup = _samples(periods.length, step), _samples(periods.warmup, step)
+    need = warmup + length + test
+    if n_samples < need:
+        raise DataError(
+            f"the record is {format_duration(n_samples * step)} ({n_samples} samples) long; it "
+            f"must be at least {format_duration(need * step)} ({need} samples): warm-up "
+            f"{warmup} + one period {length} + test window {test} samples",
+            hint="use a longer record, or shorten [periods] warmup, length or the test window",
+        )
+    return layout_periods(n_samples, length, warmup, test, missing)
+
+
+def _check_forcing(
+    frame: pd.DataFrame, names: tuple[str, ...], gaps: list[Gap], source: str
+) -> None:
+    for gap in gaps:
+        hit = [c for c in gap.columns if c in names]
+        if hit and not gap.interpolated:
+            raise DataError(
+                f"boundary condition(s) {', '.join(hit)} missing over "
+                f"{gap.describe().split(' (')[0]} ({format_duration(gap.length)}); "
+                "the simulator cannot run on missing inputs",
+                hint=f"set data.max_gap_interpolate >= '{format_duration(gap.length)}' to "
+                "interpolate it, or crop the record with data.start / data.end",
+                source=source,
+            )
+
+
+def load_measured(study: Study) -> MeasuredData:
+    """Load, convert and align a study's measured data.
+
+    Parameters
+    ----------
+    study
+        A validated study (see :func:`bayescal.config.load_study`).
+
+    Returns
+    -------
+    MeasuredData
+
+    Raises
+    ------
+    DataError
+        Unreadable file, bad timestamps, data coarser than the step, a record
+        too short for warm-up + one period + test window, or boundary
+        conditions with gaps that are not interpolated.
+    """
+    data = study.data
+    source = str(data.file)
+    sources = list(dict.fromkeys(spec.source for spec in data.columns.values()))
+    raw, zone = _read(data, sources)
+    step = pd.Timedelta(data.step)
+    frame = align(
+        _convert(raw, data),
+        step,
+        zone=zone,
+        start=None if data.start is None else pd.Timestamp(data.start),
+        end=None if data.end is None else pd.Timestamp(data.end),
+        source=source,
+    )
+    frame, gaps = fill_gaps(frame, pd.Timedelta(data.max_gap_interpolate))
+    outputs = {name: frame[name].to_numpy(dtype=float) for name in study.outputs.calibrate}
+    layout = layout_for(len(frame), step, study.periods, _missing(outputs, len(frame)))
+    forcing_names = study.boundary_conditions
+    _check_forcing(frame, forcing_names, gaps, source)
+    index = pd.DatetimeIndex(frame.index).tz_convert("UTC").tz_localize(None)
+    times = index.to_numpy().astype("datetime64[s]")
+    forcing = Forcing(
+        step=step.total_seconds(),
+        series={name: frame[name].to_numpy(dtype=float) for name in forcing_names},
+        start=times[0],
+    )
+    return MeasuredData(
+        forcing, outputs, times, step.total_seconds(), tuple(gaps), layout, Path(source)
+    )
