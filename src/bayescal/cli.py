@@ -122,3 +122,121 @@ def _simulator_line(sim: Any) -> str:
     if sim.type == "box":
         return f"simulator: box, {sim.mode}, outputs {', '.join(sim.output_names())}"
     return f"simulator: {sim.type}"
+
+
+def _parse_assignments(values: tuple[str, ...]) -> dict[str, float]:
+    """``("k_cb=0.124", ...)`` -> ``{"k_cb": 0.124}``; a malformed one is a user error."""
+    from bayescal.errors import ConfigError
+
+    out: dict[str, float] = {}
+    for item in values:
+        name, sep, text = item.partition("=")
+        try:
+            if not sep:
+                raise ValueError
+            out[name.strip()] = float(text)
+        except ValueError:
+            raise ConfigError(
+                f"--set expects NAME=VALUE with a number, got {item!r}",
+                hint="e.g. --set k_cb=0.124",
+            ) from None
+    return out
+
+
+@main.command()
+@STUDY
+@click.option(
+    "--set",
+    "assignments",
+    multiple=True,
+    metavar="NAME=VALUE",
+    help="Parameter value replacing the nominal one (physical units); repeatable.",
+)
+@click.option(
+    "--out",
+    type=click.Path(path_type=Path),
+    default=None,
+    help="Folder for simulation.csv and simulation.png [default: OUTPUT_DIR/simulate].",
+)
+@user_errors
+def simulate(study: Path, assignments: tuple[str, ...], out: Path | None) -> None:
+    """Run the simulator once on the measured boundary conditions and compare.
+
+    Prints fit metrics on the training and test windows and writes the series
+    (CSV) and a measured-vs-simulated figure (PNG).
+    """
+    from bayescal.config import load_study
+    from bayescal.simulate import check_simulation, write_simulation
+
+    config = load_study(study)
+    check = check_simulation(config, _parse_assignments(assignments))
+    folder = out if out is not None else config.study.output_dir / "simulate"
+    values = ", ".join(f"{k}={v:g}" for k, v in check.parameters.items())
+    files = write_simulation(check, folder, title=f"{config.study.name}: {values}")
+    click.echo(f"simulated {config.study.name!r} at {values}")
+    click.echo(metrics_table(check.train, check.test))
+    click.echo(f"wrote {files['csv']}\nwrote {files['png']}")
+
+
+def metrics_table(train: dict[str, Any], test: dict[str, Any]) -> str:
+    """Plain-text table of fit metrics per output and window."""
+    head = (
+        f"{'output':<16}{'window':<8}{'n':>6}{'MSE':>11}{'RMSE':>10}{'mean|e|':>10}"
+        f"{'max|e|':>10}{'bias':>10}{'CV(RMSE)%':>11}{'NMBE%':>8}"
+    )
+    rows = [head]
+    for window, metrics in (("train", train), ("test", test)):
+        for name, m in metrics.items():
+            rows.append(
+                f"{name:<16}{window:<8}{m.n:>6}{m.mse:>11.4g}{m.rmse:>10.4g}"
+                f"{m.mean_abs_error:>10.4g}{m.max_abs_error:>10.4g}{m.bias:>10.3g}"
+                f"{m.cv_rmse:>11.3g}{m.nmbe:>8.3g}"
+            )
+    return "\n".join(rows)
+
+
+@main.command()
+@click.argument("example", required=False)
+@click.argument("directory", required=False, type=click.Path(path_type=Path))
+@click.option(
+    "--force", is_flag=True, help="Copy into DIRECTORY even if it exists and is not empty."
+)
+@user_errors
+def init(example: str | None, directory: Path | None, force: bool) -> None:
+    """Copy the worked example EXAMPLE into DIRECTORY (a new study folder).
+
+    Without arguments, lists the examples.
+    """
+    from bayescal import examples
+
+    names = examples.available()
+    if example is None:
+        click.echo("examples: " + ", ".join(names))
+        return
+    target = directory if directory is not None else Path(example)
+    copy_example(example, target, force=force)
+    click.echo(f"created {target}/study.toml from example {example!r}")
+    click.echo(f"next: bayescal validate {target}   or   bayescal simulate {target}")
+
+
+def copy_example(example: str, target: Path, *, force: bool = False) -> Path:
+    """Copy a shipped example study folder to ``target``."""
+    import shutil
+
+    from bayescal import examples
+    from bayescal.errors import ConfigError
+
+    names = examples.available()
+    if example not in names:
+        raise ConfigError(f"no example {example!r}", hint=f"choose one of {', '.join(names)}")
+    if target.exists() and any(target.iterdir()) and not force:
+        raise ConfigError(
+            f"{target} exists and is not empty", hint="choose a new folder or pass --force"
+        )
+    shutil.copytree(
+        examples.path(example),
+        target,
+        dirs_exist_ok=True,
+        ignore=shutil.ignore_patterns("out", "__pycache__"),
+    )
+    return target
