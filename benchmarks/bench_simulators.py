@@ -1,6 +1,7 @@
 """Timings of the built-in simulators, measured in one run (median of repeats).
 
-Run with ``OPENBLAS_NUM_THREADS=1 python benchmarks/bench_simulators.py``.
+Run with ``OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 python benchmarks/bench_simulators.py``
+(the box part comes from ``bench_box.py`` beside it).
 """
 
 from __future__ import annotations
@@ -106,9 +107,23 @@ def bench_wall(repeats: int = 50, seed: int = 0) -> dict[str, float]:
 
 
 def main() -> None:
-    """Print the timings."""
-    for name, value in bench_wall().items():
+    """Print the timings of the wall and of the box, and their ratio to the targets."""
+    from bench_box import bench_box
+
+    wall = bench_wall()
+    for name, value in wall.items():
         print(f"{name:32s} {value:10.3f}")
+    print(
+        f"wall: {wall['wall_ms_per_run']:.2f} ms per 1500-step run = "
+        f"{wall['wall_ms_per_run'] / 50.0:.3f} of the 50 ms target"
+    )
+    box = bench_box()
+    for name, value in box.items():
+        print(f"box {name:28s} {value:10.3f} s")
+    print(
+        f"box: {box['coheating']:.2f} s per 4-week 5-minute run = "
+        f"{box['coheating'] / 2.0:.3f} of the 2 s target"
+    )
 
 
 if __name__ == "__main__":
