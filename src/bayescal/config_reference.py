@@ -1,0 +1,111 @@
+"""The study-file reference, generated from the configuration models.
+
+``python -m bayescal.config_reference > docs/study-file.md`` writes it; a test
+checks that the committed file equals the generated text, so the reference
+cannot drift from the code.
+"""
+
+from __future__ import annotations
+
+import json
+import types
+import typing
+from datetime import datetime, timedelta
+from pathlib import Path
+from typing import Any
+
+from pydantic import BaseModel
+from pydantic_core import PydanticUndefined
+
+from bayescal import config as cfg
+from bayescal.data.align import format_duration
+
+_SECTIONS: list[tuple[str, type[BaseModel], str]] = [
+    ("[study]", cfg.StudySection, ""),
+    ("[data]", cfg.DataSection, ""),
+    ("[data.columns.<glossary name>]", cfg.ColumnSpec, ""),
+    ('[simulator] type = "wall"', cfg.WallSimulator, ""),
+    ("[[simulator.layers]]", cfg.LayerSpec, "one table per layer, outside to inside"),
+    ('[simulator] type = "box"', cfg.BoxSimulator, ""),
+    ("[parameters.<name>]", cfg.Parameter, ""),
+    ('prior = { distribution = "uniform", ... }', cfg.UniformPrior, ""),
+    ('prior = { distribution = "beta", ... }', cfg.BetaPrior, ""),
+    ("[outputs]", cfg.OutputsSection, ""),
+    ("[periods]", cfg.PeriodsSection, ""),
+    ("[design]", cfg.DesignSection, ""),
+    ("[emulator]", cfg.EmulatorSection, ""),
+    ("[calibration]", cfg.CalibrationSection, ""),
+    ("[discrepancy]", cfg.DiscrepancySection, ""),
+    ("[runner]", cfg.RunnerSection, ""),
+]
+
+
+def _type_name(annotation: Any) -> str:
+    """Readable type: ``float``, ``str or None``, ``list[str]``, ``"a" | "b"``."""
+    origin = typing.get_origin(annotation)
+    args = typing.get_args(annotation)
+    if origin is typing.Annotated:
+        return _type_name(args[0])
+    if origin is typing.Literal:
+        return " or ".join(json.dumps(a) for a in args)
+    if origin in (typing.Union, types.UnionType):
+        return " or ".join(_type_name(a) for a in args)
+    if origin is not None:
+        inner = ", ".join(_type_name(a) for a in args)
+        return f"{getattr(origin, '__name__', str(origin))}[{inner}]"
+    names = {type(None): "None", timedelta: "duration", datetime: "instant", Path: "path"}
+    return names.get(annotation, getattr(annotation, "__name__", str(annotation)))
+
+
+def _value(value: Any) -> str:
+    if isinstance(value, timedelta):
+        return f"`{json.dumps(format_duration(value))}`"
+    try:
+        return "`" + json.dumps(value, default=str, ensure_ascii=False) + "`"
+    except (TypeError, ValueError):
+        return f"`{value}`"
+
+
+def _cell(text: str) -> str:
+    return " ".join(str(text).split()).replace("|", "\\|")
+
+
+def section_markdown(title: str, model: type[BaseModel], note: str = "") -> str:
+    """One section of the reference as a Markdown table."""
+    doc = " ".join((model.__doc__ or "").split())
+    lines = [f"## `{title}`", "", doc + (f" ({note})" if note else ""), ""]
+    lines += ["| key | type | default | description | example |", "|---|---|---|---|---|"]
+    for name, field in model.model_fields.items():
+        if field.is_required():
+            default = "required"
+        elif field.default_factory is not None:
+            default = _value(field.default_factory())  # type: ignore[call-arg]
+        elif field.default is PydanticUndefined:
+            default = "required"
+        else:
+            default = _value(field.default)
+        example = ", ".join(_value(e) for e in (field.examples or []))
+        lines.append(
+            f"| `{name}` | {_cell(_type_name(field.annotation))} | {_cell(default)} | "
+            f"{_cell(field.description or '')} | {_cell(example)} |"
+        )
+    return "\n".join(lines)
+
+
+def study_reference_markdown() -> str:
+    """The whole study-file reference."""
+    head = [
+        "# Study file reference (`study.toml`)",
+        "",
+        "Generated from `bayescal.config` by `python -m bayescal.config_reference`; do not edit.",
+        "Units are given in brackets in each description. Durations are written like",
+        '`"30min"`, `"1D"`, `"3h"`; instants as ISO 8601. Relative paths start at the study',
+        "folder.",
+        "",
+    ]
+    body = [section_markdown(title, model, note) for title, model, note in _SECTIONS]
+    return "\n".join(head) + "\n" + "\n\n".join(body) + "\n"
+
+
+if __name__ == "__main__":
+    print(study_reference_markdown(), end="")
