@@ -1,0 +1,417 @@
+"""Calibration parameters, their priors and the Latin-hypercube design of simulator runs.
+
+Two scales are used for every calibration parameter ``theta`` with bounds
+``[lower, upper]``:
+
+* the *physical* scale, in the parameter's own unit, on which the simulator
+  is run;
+* the *normalised* scale ``u = (theta - lower) / (upper - lower)`` in
+  ``[0, 1]``, on which the emulator and the calibration work (Higdon et al.
+  2008; the paper's section 2).
+
+The map between them is linear for every prior, so a design that is a Latin
+hypercube in ``[0, 1]^t`` is a Latin hypercube over the box of the priors'
+bounds. **The design covers the bounds, not the prior density**: a Beta prior
+concentrates belief in part of the interval but the simulator runs are spread
+evenly over all of it, as the emulator must be accurate wherever the posterior
+may go. The prior density enters only the calibration, through
+:meth:`Prior.logpdf_unit`.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, ClassVar, Literal
+
+import numpy as np
+from scipy import special
+from scipy.stats import qmc
+
+from bayescal.errors import ConfigError
+from bayescal.io import atomic_write_json, atomic_write_text, read_json
+
+__all__ = [
+    "BetaPrior",
+    "Design",
+    "Prior",
+    "UniformPrior",
+    "latin_hypercube",
+    "prior_from_spec",
+]
+
+Optimization = Literal["random-cd", "lloyd"]
+OPTIMIZATIONS: tuple[str, ...] = ("random-cd", "lloyd")
+DESIGN_FORMAT = "bayescal-design/1"
+
+
+def _finite(value: float, what: str) -> float:
+    try:
+        number = float(value)
+    except (TypeError, ValueError):
+        raise ConfigError(f"{what} must be a number, got {value!r}") from None
+    if not math.isfinite(number):
+        raise ConfigError(f"{what} must be finite, got {value!r}")
+    return number
+
+
+@dataclass(frozen=True)
+class Prior:
+    """Base class of priors on a bounded interval ``[lower, upper]``.
+
+    Parameters
+    ----------
+    lower
+        Lower bound, in the parameter's unit.
+    upper
+        Upper bound, in the parameter's unit; must exceed ``lower``.
+    """
+
+    lower: float
+    upper: float
+    distribution: ClassVar[str] = "base"
+
+    def __post_init__(self) -> None:
+        lower = _finite(self.lower, "prior lower bound")
+        upper = _finite(self.upper, "prior upper bound")
+        if not lower < upper:
+            raise ConfigError(
+                f"prior bounds must satisfy lower < upper, got lower={lower!r}, upper={upper!r}",
+                hint="swap or widen the bounds",
+            )
+        object.__setattr__(self, "lower", lower)
+        object.__setattr__(self, "upper", upper)
+
+    @property
+    def width(self) -> float:
+        """``upper - lower``, in the parameter's unit."""
+        return self.upper - self.lower
+
+    def to_unit(self, value: Any) -> np.ndarray:
+        """Map physical values to the normalised scale ``(value - lower) / width``."""
+        return (np.asarray(value, dtype=float) - self.lower) / self.width
+
+    def from_unit(self, u: Any) -> np.ndarray:
+        """Map normalised values back to the physical scale ``lower + u * width``."""
+        return self.lower + np.asarray(u, dtype=float) * self.width
+
+    def logpdf_unit(self, u: Any) -> np.ndarray:
+        """Log density on the normalised scale; ``-inf`` outside ``[0, 1]``."""
+        raise NotImplementedError
+
+    def logpdf(self, value: Any) -> np.ndarray:
+        """Log density on the physical scale; ``-inf`` outside ``[lower, upper]``.
+
+        Equals ``logpdf_unit(to_unit(value)) - log(width)`` (change of variables).
+        """
+        return self.logpdf_unit(self.to_unit(value)) - math.log(self.width)
+
+    def sample_unit(self, rng: np.random.Generator, size: int | tuple[int, ...]) -> np.ndarray:
+        """Draw from the prior on the normalised scale."""
+        raise NotImplementedError
+
+    def spec(self) -> dict[str, Any]:
+        """The prior as a plain dictionary (the study file's ``{distribution, ...}``)."""
+        return {"distribution": self.distribution, "lower": self.lower, "upper": self.upper}
+
+
+@dataclass(frozen=True)
+class UniformPrior(Prior):
+    """Uniform prior on ``[lower, upper]``."""
+
+    distribution: ClassVar[str] = "uniform"
+
+    def logpdf_unit(self, u: Any) -> np.ndarray:
+        """Log density on the normalised scale: 0 on ``[0, 1]``, ``-inf`` outside."""
+        u = np.asarray(u, dtype=float)
+        return np.where((u >= 0.0) & (u <= 1.0), 0.0, -np.inf)
+
+    def sample_unit(self, rng: np.random.Generator, size: int | tuple[int, ...]) -> np.ndarray:
+        """Draw uniformly from ``[0, 1)``."""
+        return rng.random(size)
+
+
+@dataclass(frozen=True)
+class BetaPrior(Prior):
+    """Beta(a, b) prior scaled to ``[lower, upper]``.
+
+    Parameters
+    ----------
+    lower
+        Lower bound, in the parameter's unit.
+    upper
+        Upper bound, in the parameter's unit.
+    a
+        First shape parameter, > 0. [-]
+    b
+        Second shape parameter, > 0. [-]
+    """
+
+    a: float
+    b: float
+    distribution: ClassVar[str] = "beta"
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        for name in ("a", "b"):
+            value = _finite(getattr(self, name), f"beta prior shape {name}")
+            if value <= 0:
+                raise ConfigError(
+                    f"beta prior shape {name} must be > 0, got {value!r}",
+                    hint="a = b = 1 is the uniform prior; a, b > 1 favour the middle",
+                )
+            object.__setattr__(self, name, value)
+
+    def logpdf_unit(self, u: Any) -> np.ndarray:
+        """Log Beta(a, b) density on the normalised scale; ``-inf`` outside ``[0, 1]``."""
+        u = np.asarray(u, dtype=float)
+        inside = (u >= 0.0) & (u <= 1.0)
+        clipped = np.clip(u, 0.0, 1.0)
+        with np.errstate(divide="ignore"):
+            value = (
+                special.xlogy(self.a - 1.0, clipped)
+                + special.xlog1py(self.b - 1.0, -clipped)
+                - special.betaln(self.a, self.b)
+            )
+        return np.where(inside, value, -np.inf)
+
+    def sample_unit(self, rng: np.random.Generator, size: int | tuple[int, ...]) -> np.ndarray:
+        """Draw from Beta(a, b)."""
+        return rng.beta(self.a, self.b, size)
+
+    def spec(self) -> dict[str, Any]:
+        """The prior as a plain dictionary, with its shapes."""
+        return {**super().spec(), "a": self.a, "b": self.b}
+
+
+def prior_from_spec(
+    distribution: str,
+    lower: float,
+    upper: float,
+    a: float | None = None,
+    b: float | None = None,
+) -> Prior:
+    """Build a prior from the study file's fields.
+
+    Parameters
+    ----------
+    distribution
+        ``"uniform"`` or ``"beta"``.
+    lower, upper
+        Bounds, in the parameter's unit.
+    a, b
+        Beta shape parameters (required for ``"beta"``, refused for ``"uniform"``). [-]
+
+    Returns
+    -------
+    Prior
+        A :class:`UniformPrior` or :class:`BetaPrior`.
+    """
+    if distribution == "uniform":
+        if a is not None or b is not None:
+            raise ConfigError(
+                f"a uniform prior takes no shape parameters, got a={a!r}, b={b!r}",
+                hint='remove a and b, or set distribution = "beta"',
+            )
+        return UniformPrior(lower, upper)
+    if distribution == "beta":
+        if a is None or b is None:
+            raise ConfigError(
+                f"a beta prior needs both shape parameters, got a={a!r}, b={b!r}",
+                hint="set a and b (> 0); a = b = 1 is uniform",
+            )
+        return BetaPrior(lower, upper, a, b)
+    raise ConfigError(f"unknown prior distribution {distribution!r}; expected 'uniform' or 'beta'")
+
+
+@dataclass(frozen=True, eq=False)  # no == : arrays have no single truth value
+class Design:
+    """A set of ``R`` parameter vectors at which to run the simulator.
+
+    Parameters
+    ----------
+    priors
+        Parameter name -> prior, in column order.
+    unit
+        Normalised design, shape ``(R, t)``, in ``[0, 1]``.
+    seed
+        Seed of the random generator that drew it (``None`` for a design given
+        explicitly).
+    optimization
+        The Latin-hypercube optimisation used, if any.
+    """
+
+    priors: Mapping[str, Prior]
+    unit: np.ndarray
+    seed: int | None = None
+    optimization: str | None = None
+
+    def __post_init__(self) -> None:
+        unit = np.array(self.unit, dtype=float)
+        t = len(self.priors)
+        if unit.ndim != 2 or unit.shape[1] != t:
+            raise ConfigError(f"design must have shape (runs, {t}), got {unit.shape}")
+        if not np.all((unit >= 0.0) & (unit <= 1.0)):
+            raise ConfigError("normalised design values must lie in [0, 1]")
+        unit.flags.writeable = False
+        object.__setattr__(self, "unit", unit)
+        object.__setattr__(self, "priors", dict(self.priors))
+
+    @classmethod
+    def from_values(
+        cls, priors: Mapping[str, Prior], values: Any, seed: int | None = None
+    ) -> Design:
+        """A design from explicit physical values, shape ``(R, t)``, inside the bounds."""
+        values = np.atleast_2d(np.asarray(values, dtype=float))
+        if values.ndim != 2 or values.shape[1] != len(priors):
+            raise ConfigError(f"design must have shape (runs, {len(priors)}), got {values.shape}")
+        columns = [p.to_unit(values[:, j]) for j, p in enumerate(priors.values())]
+        unit = np.column_stack(columns) if columns else values
+        outside = [n for j, n in enumerate(priors) if np.any((unit[:, j] < 0) | (unit[:, j] > 1))]
+        if outside:
+            raise ConfigError(f"design values of {outside} lie outside their prior bounds")
+        return cls(priors, unit, seed=seed)
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        """Parameter names, in column order."""
+        return tuple(self.priors)
+
+    @property
+    def runs(self) -> int:
+        """Number of runs ``R``."""
+        return int(self.unit.shape[0])
+
+    @property
+    def values(self) -> np.ndarray:
+        """Physical design, shape ``(R, t)``, each column in its parameter's unit."""
+        if not self.priors:
+            return np.empty((self.runs, 0))
+        return np.column_stack(
+            [p.from_unit(self.unit[:, j]) for j, p in enumerate(self.priors.values())]
+        )
+
+    def row(self, index: int) -> dict[str, float]:
+        """Physical parameter values of run ``index`` as ``{name: value}``."""
+        values = self.values[index]
+        return {name: float(v) for name, v in zip(self.names, values, strict=True)}
+
+    def to_frame(self) -> Any:
+        """The physical design as a ``pandas.DataFrame`` (one row per run, index ``run``)."""
+        import pandas as pd
+
+        frame = pd.DataFrame(self.values, columns=list(self.names))
+        frame.index.name = "run"
+        return frame
+
+    def _metadata(self) -> dict[str, Any]:
+        return {
+            "format": DESIGN_FORMAT,
+            "seed": self.seed,
+            "optimization": self.optimization,
+            "priors": {name: prior.spec() for name, prior in self.priors.items()},
+        }
+
+    def save(self, path: str | Path) -> Path:
+        """Write the design atomically as JSON (``.json``) or CSV (``.csv``).
+
+        JSON holds everything. CSV is a table with a column ``run``, the
+        physical values under the parameter names and the normalised values
+        under ``u:<name>``, preceded by one ``#`` line with the seed,
+        optimisation and priors as JSON. Both read back exactly with :meth:`load`.
+        """
+        import json
+
+        path = Path(path)
+        suffix = path.suffix.lower()
+        if suffix == ".json":
+            document = {**self._metadata(), "names": list(self.names)}
+            document |= {"unit": self.unit.tolist(), "values": self.values.tolist()}
+            return atomic_write_json(path, document)
+        if suffix == ".csv":
+            frame = self.to_frame()
+            for j, name in enumerate(self.names):
+                frame[f"u:{name}"] = self.unit[:, j]
+            header = "# " + json.dumps(self._metadata()) + "\n"
+            return atomic_write_text(path, header + frame.to_csv(lineterminator="\n"))
+        raise ConfigError(f"design file must end in .json or .csv, got {path.name!r}")
+
+    @classmethod
+    def load(cls, path: str | Path) -> Design:
+        """Read a design written by :meth:`save`."""
+        import json
+
+        path = Path(path)
+        if path.suffix.lower() == ".json":
+            document = read_json(path)
+            unit = np.array(document["unit"], dtype=float).reshape(-1, len(document["names"]))
+        elif path.suffix.lower() == ".csv":
+            with path.open(encoding="utf-8", newline="") as stream:
+                document = json.loads(stream.readline().lstrip("#"))
+                rows = list(csv.DictReader(stream))  # float() reads repr'd floats exactly
+            columns = [f"u:{name}" for name in document["priors"]]
+            unit = np.array([[float(r[c]) for c in columns] for r in rows]).reshape(
+                -1, len(columns)
+            )
+        else:
+            raise ConfigError(f"design file must end in .json or .csv, got {path.name!r}")
+        if document.get("format") != DESIGN_FORMAT:
+            raise ConfigError(f"{path}: not a bayescal design (format {document.get('format')!r})")
+        priors = {name: prior_from_spec(**spec) for name, spec in document["priors"].items()}
+        return cls(priors, unit, seed=document["seed"], optimization=document["optimization"])
+
+
+def latin_hypercube(
+    priors: Mapping[str, Prior],
+    runs: int,
+    seed: int,
+    optimization: Optimization | None = None,
+) -> Design:
+    """Draw a Latin-hypercube design over the priors' bounds.
+
+    Parameters
+    ----------
+    priors
+        Parameter name -> prior; the column order follows this mapping.
+    runs
+        Number of simulator runs ``R``; at least ``t + 2`` for ``t`` parameters
+        (the emulator needs more runs than parameters; the paper uses 20–50).
+    seed
+        Seed of the generator (``numpy.random.default_rng(seed)``); recorded
+        in the design, so the same seed gives the same design bit for bit.
+    optimization
+        ``None`` (plain scrambled LHS), ``"random-cd"`` (column permutations
+        that lower the centred discrepancy; keeps the Latin-hypercube
+        property) or ``"lloyd"`` (Lloyd-Max relaxation towards even spacing;
+        may break the one-point-per-stratum property; needs ``t >= 2``).
+
+    Returns
+    -------
+    Design
+        The normalised design is the LHS in ``[0, 1]^t``; the physical design
+        is ``lower + u * (upper - lower)`` per column, i.e. uniform over the
+        bounds whatever the prior's shape (see the module docstring).
+    """
+    if not priors:
+        raise ConfigError("a design needs at least one calibration parameter, got none")
+    t = len(priors)
+    if isinstance(runs, bool) or not isinstance(runs, int | np.integer) or runs < t + 2:
+        raise ConfigError(
+            f"a design for {t} parameter(s) needs at least {t + 2} runs, got runs={runs!r}",
+            hint="the paper uses 20 to 50 runs",
+        )
+    if isinstance(seed, bool) or not isinstance(seed, int | np.integer) or seed < 0:
+        raise ConfigError(f"design seed must be a non-negative integer, got {seed!r}")
+    if optimization is not None and optimization not in OPTIMIZATIONS:
+        raise ConfigError(
+            f"unknown design optimization {optimization!r}; expected None, "
+            + " or ".join(repr(o) for o in OPTIMIZATIONS)
+        )
+    if optimization == "lloyd" and t < 2:
+        raise ConfigError("optimization 'lloyd' needs at least 2 parameters; use 'random-cd'")
+    sampler = qmc.LatinHypercube(d=t, optimization=optimization, rng=np.random.default_rng(seed))
+    unit = sampler.random(int(runs))
+    return Design(priors, unit, seed=int(seed), optimization=optimization)
