@@ -9,7 +9,8 @@ DOC = Path(__file__).resolve().parents[1] / "docs" / "study-file.md"
 
 def test_committed_reference_is_current() -> None:
     assert DOC.read_text(encoding="utf-8") == study_reference_markdown(), (
-        "docs/study-file.md is stale: run `python -m bayescal.config_reference > docs/study-file.md`"
+        "docs/study-file.md is stale: run "
+        "`python -m bayescal.config_reference > docs/study-file.md`"
     )
 
 

@@ -67,7 +67,7 @@ class Forcing:
     def times(self) -> np.ndarray:
         """Sample instants (UTC ``datetime64[s]``)."""
         offsets = (np.arange(self.n) * self.step).astype("timedelta64[s]")
-        return np.datetime64(self.start, "s") + offsets
+        return np.asarray(self.start, dtype="datetime64[s]") + offsets
 
     def require(self, names: tuple[str, ...] | list[str], who: str) -> None:
         """Raise a clear error if any of ``names`` is missing."""

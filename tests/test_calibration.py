@@ -1,0 +1,145 @@
+"""Calibration of theta* (eq. 16) on the virtual wall with known truth (paper's Table 3)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from bayescal.calibration.posterior import CalibrationPosterior, Posterior, calibrate
+from bayescal.design import BetaPrior, UniformPrior
+from bayescal.emulator.assemble import Assembled, assemble
+from bayescal.emulator.gp import Emulator, train
+from bayescal.emulator.kron import make_algebra
+from bayescal.errors import ConfigError
+from virtual_wall import PRIORS, VirtualExperiment, random_truth, virtual_experiment
+
+NAMES = ("k_cb", "cp_cb", "cp_fb")
+VARIANCE = 0.99  # basis variance fraction; see test_default_basis_* for 0.90
+
+
+def _prior_sd(name: str) -> float:
+    return PRIORS[name].width / np.sqrt(12.0)  # SD of the uniform prior
+
+
+def _fit(seed: int, truth: dict[str, float] | None = None) -> tuple[VirtualExperiment, Assembled]:
+    ve = virtual_experiment(seed=seed, truth=truth)
+    a = assemble(ve.design, ve.runs, ve.measured, ve.boundary, ve.layout, variance=VARIANCE)
+    return ve, a
+
+
+@pytest.fixture(scope="module")
+def small() -> tuple[Assembled, Emulator]:
+    ve = virtual_experiment(seed=4, runs=8, periods=6, warmup_days=2, test_days=0)
+    a = assemble(ve.design, ve.runs, ve.measured, ve.boundary, ve.layout, components=2)
+    return a, train(a, n_burn=100, n_draws=20, n_chains=1, seed=0)
+
+
+def test_kronecker_and_dense_log_posteriors_agree(small: tuple[Assembled, Emulator]) -> None:
+    a, em = small
+    priors = list(a.priors.values())
+    targets = [
+        CalibrationPosterior(
+            make_algebra(kind, em.theta, em.x, em.kernels, em.basis.ktk, em.w, a.w_star),
+            priors,
+            em.lam_prior,
+            a.lam_star_prior,
+        )
+        for kind in ("kronecker", "dense")
+    ]
+    rng = np.random.default_rng(0)
+    for _ in range(5):
+        v = np.concatenate([rng.random(3), [em.lam, rng.uniform(5.0, 50.0)]])
+        fast, ref = (t(v) for t in targets)
+        # Schur/eigen path vs dense Cholesky of a ~60-row covariance: agree to 1e-9.
+        assert fast == pytest.approx(ref, rel=1e-9, abs=1e-9)
+    outside = np.array([1.2, 0.5, 0.5, em.lam, 10.0])
+    assert targets[0](outside) == -np.inf
+
+
+def test_serial_and_processes_give_the_same_draws(small: tuple[Assembled, Emulator]) -> None:
+    a, em = small
+    runs = [
+        calibrate(em, a, n_chains=4, n_burn=30, n_draws=20, seed=9, backend=b)
+        for b in ("serial", "processes")
+    ]
+    np.testing.assert_array_equal(runs[0].draws, runs[1].draws)
+    assert runs[0].draws.shape == (4, 20, 3)
+
+
+def test_short_chains_are_flagged(small: tuple[Assembled, Emulator]) -> None:
+    a, em = small
+    post = calibrate(em, a, n_chains=4, n_burn=10, n_draws=20, seed=1, backend="serial")
+    assert not post.diagnostics.ok
+    assert any("ESS" in w for w in post.warnings)
+
+
+def test_priors_must_keep_the_design_bounds(small: tuple[Assembled, Emulator]) -> None:
+    a, em = small
+    bad = dict(a.priors)
+    bad["k_cb"] = UniformPrior(0.05, 0.2)
+    with pytest.raises(ConfigError, match=r"bounds \[0.05, 0.2\], the design was drawn on"):
+        calibrate(em, a, bad, n_chains=4, n_burn=10, n_draws=10, backend="serial")
+    beta = dict(a.priors)
+    beta["cp_fb"] = BetaPrior(672.0, 1008.0, 1.0, 2.0)  # the paper's later Beta(1, 2)
+    post = calibrate(em, a, beta, n_chains=4, n_burn=10, n_draws=10, backend="serial")
+    assert post.priors["cp_fb"] == beta["cp_fb"]
+
+
+@pytest.fixture(scope="module")
+def paper() -> tuple[VirtualExperiment, Posterior]:
+    ve, a = _fit(seed=0)
+    em = train(a, n_burn=400, n_draws=100, n_chains=1, seed=1)
+    post = calibrate(em, a, n_chains=4, n_burn=1000, n_draws=1500, seed=3, backend="processes")
+    return ve, post
+
+
+def test_virtual_wall_intervals_cover_the_truth(paper: tuple[VirtualExperiment, Posterior]) -> None:
+    ve, post = paper
+    lower, upper = post.interval(0.95)
+    for k, name in enumerate(post.names):
+        assert lower[k] <= ve.truth[name] <= upper[k], name
+
+
+def test_concrete_is_identified_and_the_boards_are_not(
+    paper: tuple[VirtualExperiment, Posterior],
+) -> None:
+    _, post = paper
+    sd = post.draws.reshape(-1, 3).std(axis=0)
+    ratio = {n: sd[k] / _prior_sd(n) for k, n in enumerate(post.names)}
+    # Paper's Table 3: k_CB and cp_CB within a few % of their prior ranges; cp_FB
+    # spread over its interval. Thresholds 0.1 and 0.3 separate the two cases.
+    assert ratio["k_cb"] < 0.1
+    assert ratio["cp_cb"] < 0.1
+    assert ratio["cp_fb"] > 0.3
+
+
+def test_diagnostics_pass_and_inference_data_is_physical(
+    paper: tuple[VirtualExperiment, Posterior],
+) -> None:
+    _, post = paper
+    assert post.warnings == (), post.warnings
+    assert np.all(post.diagnostics.rhat <= 1.01)
+    assert np.all(post.diagnostics.ess_bulk[:3] >= 400)
+    idata = post.inference_data()
+    assert set(idata.posterior.data_vars) == {*NAMES, "lambda", "lambda_star"}
+    np.testing.assert_array_equal(idata.posterior["cp_cb"].values, post.draws[..., 1])
+    assert 640.0 <= float(idata.posterior["cp_cb"].min()) <= 960.0
+    table = post.summary()
+    assert list(table.index) == [*NAMES, "lambda", "lambda_star"]
+
+
+@pytest.mark.slow
+def test_coverage_over_ten_truths() -> None:
+    rng = np.random.default_rng(2024)
+    hits = dict.fromkeys(NAMES, 0)
+    n_cases = 10
+    for case in range(n_cases):
+        truth = random_truth(rng)
+        _, a = _fit(seed=100 + case, truth=truth)
+        em = train(a, n_burn=400, n_draws=100, n_chains=1, seed=case)
+        post = calibrate(em, a, n_chains=4, n_burn=400, n_draws=600, seed=case)
+        lower, upper = post.interval(0.95)
+        for k, name in enumerate(NAMES):
+            hits[name] += int(lower[k] <= truth[name] <= upper[k])
+    # With exact 95 % intervals, 8 or more hits in 10 has probability 0.99 per parameter.
+    assert all(h >= 8 for h in hits.values()), hits
