@@ -7,8 +7,9 @@ into :class:`Study` and turns every problem into one
 its key path, the value received and what was expected, on one line.
 
 Every field carries a description (with its unit in brackets) and examples;
-the study-file reference is generated from these models. A new simulator type
-is one more class in :data:`SimulatorSection`.
+the study-file reference is generated from these models. The ``[simulator]``
+sections live in :mod:`bayescal.config_simulators` (re-exported here); a new
+simulator type is one more class in its :data:`SimulatorSection`.
 """
 
 from __future__ import annotations
@@ -17,7 +18,6 @@ import difflib
 import hashlib
 import json
 import os
-import re
 import tomllib
 import types
 from datetime import date, datetime, timedelta, tzinfo
@@ -28,7 +28,6 @@ import pandas as pd
 from pydantic import (
     BaseModel,
     BeforeValidator,
-    ConfigDict,
     Field,
     PrivateAttr,
     ValidationError,
@@ -36,26 +35,73 @@ from pydantic import (
     field_validator,
     model_validator,
 )
-from pydantic_core import PydanticCustomError
 
+from bayescal.config_simulators import (
+    _KIND_UNITS,
+    _NAME,
+    BoxSimulator,
+    CommandOutputs,
+    CommandSection,
+    EnergyPlusOutput,
+    EnergyPlusSchedule,
+    EnergyPlusSection,
+    FmuSection,
+    LayerSpec,
+    SimulatorSection,
+    WallSimulator,
+    _f,
+    _fail,
+    _normal_unit,
+    _resolve,
+    _Section,
+)
 from bayescal.data.align import format_duration, parse_duration, parse_time_zone
 from bayescal.data.measured import column_problems
 from bayescal.errors import ConfigError
-from bayescal.simulators.fvm import LAYER_PROPERTIES
+
+__all__ = [  # the [simulator] sections are re-exported from bayescal.config_simulators
+    "FORMATS",
+    "STUDY_FILE",
+    "BetaPrior",
+    "BoxSimulator",
+    "CalibrationSection",
+    "ColumnSpec",
+    "CommandOutputs",
+    "CommandSection",
+    "DataSection",
+    "DesignSection",
+    "DiscrepancySection",
+    "PredictSection",
+    "Duration",
+    "EmulatorSection",
+    "EnergyPlusOutput",
+    "EnergyPlusSchedule",
+    "EnergyPlusSection",
+    "FmuSection",
+    "Instant",
+    "LayerSpec",
+    "OutputsSection",
+    "Parameter",
+    "PeriodsSection",
+    "Prior",
+    "RunnerSection",
+    "SimulatorSection",
+    "Study",
+    "StudySection",
+    "UniformPrior",
+    "WallSimulator",
+    "format_errors",
+    "load_study",
+    "study_from_dict",
+]
 
 STUDY_FILE = "study.toml"
 FORMATS = ("csv", "parquet", "epw", "modelica")
 _EXTENSIONS = {".csv": "csv", ".tsv": "csv", ".parquet": "parquet", ".pq": "parquet"}
 _EXTENSIONS |= {".epw": "epw", ".txt": "modelica", ".mos": "modelica"}
-_NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 
 
 # --------------------------------------------------------------------------- helpers
-
-
-def _f(description: str, *examples: Any, **constraints: Any) -> Any:
-    """A documented field: description (unit in brackets), examples, constraints."""
-    return Field(description=description, examples=list(examples), **constraints)
 
 
 def _duration(value: object) -> timedelta:
@@ -81,37 +127,6 @@ Duration = Annotated[timedelta, BeforeValidator(_duration)]
 """A duration written with a unit: ``"30min"``, ``"1h"``, ``"1D"``."""
 Instant = Annotated[datetime, BeforeValidator(_instant)]
 """A date-time; naive values are local times of ``[data].time_zone``."""
-
-
-def _fail(messages: list[str]) -> None:
-    """Raise the collected cross-field problems (each message starts with its key path)."""
-    if messages:
-        raise PydanticCustomError("cross_check", "{text}", {"text": "; ".join(messages)})
-
-
-def _suggest(name: str, valid: list[str] | tuple[str, ...]) -> str:
-    close = difflib.get_close_matches(name, list(valid), n=1)
-    return f"; did you mean {close[0]!r}?" if close else f"; expected one of {', '.join(valid)}"
-
-
-def _resolve(value: Path, info: ValidationInfo, what: str) -> Path:
-    """An absolute path; relative ones start at the study folder and may not leave it."""
-    if str(value) in ("", "."):
-        raise ValueError(f"expected {what}, got {str(value)!r}")
-    if value.is_absolute():
-        return value
-    root = Path(os.path.normpath(Path((info.context or {}).get("root", Path.cwd()))))
-    resolved = Path(os.path.normpath(root / value))
-    if not resolved.is_relative_to(root):
-        raise ValueError(
-            f"path {str(value)!r} leaves the study folder; give an absolute path or move "
-            "it into the study folder"
-        )
-    return resolved
-
-
-class _Section(BaseModel):
-    model_config = ConfigDict(frozen=True, extra="forbid")
 
 
 # --------------------------------------------------------------------------- [study], [data]
@@ -297,226 +312,6 @@ def _utc(value: datetime, zone: tzinfo) -> pd.Timestamp:
     return ts.tz_convert("UTC") if ts.tz is not None else ts.tz_localize(zone).tz_convert("UTC")
 
 
-# --------------------------------------------------------------------------- [simulator]
-
-_KIND_UNITS = {
-    "length": ({"m"}, "m"),
-    "conductivity": ({"W/mK", "W/Km", "Wm-1K-1", "W/m/K"}, "W/(m·K)"),
-    "density": ({"kg/m3", "kgm-3"}, "kg/m³"),
-    "specific_heat": ({"J/kgK", "J/Kkg", "Jkg-1K-1", "J/kg/K"}, "J/(kg·K)"),
-    "resistance": ({"m2K/W", "Km2/W", "m2KW-1"}, "m²·K/W"),
-    "coefficient": ({"W/m2K", "W/Km2", "Wm-2K-1", "W/m2/K"}, "W/(m²·K)"),
-    "wind_coefficient": ({"J/m3K", "J/Km3", "Jm-3K-1", "Ws/m3K"}, "J/(m³·K)"),
-    "capacity": ({"J/K", "JK-1"}, "J/K"),
-    "conductance": ({"W/K", "WK-1"}, "W/K"),
-    "dimensionless": ({"1", "-", "fraction"}, "1"),
-}
-"""Kind of a calibration target -> (accepted unit spellings, normalised; the SI unit)."""
-
-
-def _normal_unit(unit: str) -> str:
-    return re.sub(r"[\s·.*()^]", "", unit.replace("²", "2").replace("³", "3"))
-
-
-class _SimulatorBase(_Section):
-    """What every simulator section tells the rest of the configuration."""
-
-    def target_kinds(self) -> dict[str, str] | None:
-        """Calibratable target -> kind (see ``_KIND_UNITS``); None accepts any target."""
-        return None
-
-    def output_names(self) -> tuple[str, ...]:
-        """Series the simulator produces (empty: not known before it runs)."""
-        return ()
-
-    def input_names(self) -> tuple[str, ...]:
-        """Boundary conditions the simulator cannot run without."""
-        return ()
-
-
-class LayerSpec(_Section):
-    """One layer of a wall, outside to inside."""
-
-    name: str = _f("Layer name, used in targets.", "concrete")
-    thickness: float = _f("Thickness. [m]", 0.15, gt=0)
-    conductivity: float = _f("Thermal conductivity. [W/(m·K)]", 0.12, gt=0)
-    density: float = _f("Density. [kg/m³]", 552.0, gt=0)
-    specific_heat: float = _f("Specific heat capacity. [J/(kg·K)]", 800.0, gt=0)
-
-    @field_validator("name")
-    @classmethod
-    def _name(cls, value: str) -> str:
-        if not _NAME.match(value):
-            raise ValueError(f"layer names are identifiers (letters, digits, _), got {value!r}")
-        return value
-
-
-class WallSimulator(_SimulatorBase):
-    """``type = "wall"``: the built-in wall (:class:`bayescal.simulators.wall.MultilayerWall`)."""
-
-    type: Literal["wall"] = _f("Simulator type.", "wall")
-    layers: list[LayerSpec] = _f(
-        "Layers from the outside face to the inside face ([[simulator.layers]] tables).",
-        [
-            {
-                "name": "concrete",
-                "thickness": 0.15,
-                "conductivity": 0.12,
-                "density": 552.0,
-                "specific_heat": 800.0,
-            }
-        ],
-        min_length=1,
-    )
-    boundary: Literal["surface", "air"] = _f(
-        "'surface': measured surface temperatures imposed on both faces; 'air': air "
-        "temperatures through the surface resistances, plus absorbed solar outside.",
-        "air",
-        default="surface",
-    )
-    r_se: float = _f(
-        "Outside surface resistance (air boundary). [m²·K/W]", 0.04, default=0.04, gt=0
-    )
-    r_si: float = _f("Inside surface resistance (air boundary). [m²·K/W]", 0.13, default=0.13, gt=0)
-    solar_absorptance: float = _f(
-        "Solar absorptance of the outside face; > 0 needs boundary 'air' and the boundary "
-        "condition poa_global_out. [-]",
-        0.6,
-        default=0.0,
-        ge=0,
-        le=1,
-    )
-    outputs: list[str] = _f(
-        "Series produced: heat_flux_in, heat_flux_out, temp_surf_out, temp_surf_in, and "
-        "temp_interface_<i> / heat_flux_interface_<i> at the interface between layers i-1 "
-        "and i (outside layer 0).",
-        ["heat_flux_in", "temp_interface_2"],
-        default=["heat_flux_in"],
-        min_length=1,
-    )
-    scheme: Literal["crank-nicolson", "backward-euler", "exact"] = _f(
-        "Time integration scheme.", "exact", default="crank-nicolson"
-    )
-    tolerance: float = _f(
-        "Relative error bound of the periodic response down to the period of two clock "
-        "steps; it chooses mesh and sub-steps. [-]",
-        1e-3,
-        default=1e-2,
-        gt=0,
-        le=0.25,
-    )
-    cells: list[int] | None = _f("Cells per layer, overriding tolerance.", [4, 10, 4], default=None)
-
-    @model_validator(mode="after")
-    def _consistent(self) -> WallSimulator:
-        from bayescal.simulators.wall import allowed_outputs
-
-        names = [layer.name for layer in self.layers]
-        allowed = allowed_outputs(len(names))
-        problems = [
-            f"simulator.outputs: {out!r} is not a wall output{_suggest(out, allowed)}"
-            for out in self.outputs
-            if out not in allowed
-        ]
-        if len(set(names)) != len(names):
-            problems.append(f"simulator.layers: layer names must be unique, got {names}")
-        if len(set(self.outputs)) != len(self.outputs):
-            problems.append(f"simulator.outputs: repeated names in {self.outputs}")
-        if self.boundary == "surface" and self.solar_absorptance > 0:
-            problems.append(
-                "simulator.solar_absorptance: > 0 needs boundary = 'air' (imposed surface "
-                "temperatures already contain the solar gains)"
-            )
-        if self.cells is not None and (len(self.cells) != len(names) or min(self.cells) < 1):
-            problems.append(f"simulator.cells: one count >= 1 per layer, got {self.cells}")
-        _fail(problems)
-        return self
-
-    def target_kinds(self) -> dict[str, str]:
-        kinds = {"thickness": "length"} | {p: p for p in LAYER_PROPERTIES if p != "thickness"}
-        found = {f"{layer.name}.{p}": kinds[p] for layer in self.layers for p in LAYER_PROPERTIES}
-        if self.boundary == "air":  # surface resistances and solar act only with air boundaries
-            found |= {"r_si": "resistance", "r_se": "resistance"}
-            found["solar_absorptance"] = "dimensionless"
-        return found
-
-    def output_names(self) -> tuple[str, ...]:
-        return tuple(self.outputs)
-
-    def input_names(self) -> tuple[str, ...]:
-        if self.boundary == "surface":
-            return ("temp_surf_out", "temp_surf_in")
-        solar = ("poa_global_out",) if self.solar_absorptance > 0 else ()
-        return ("temp_air_out", "temp_air_in", *solar)
-
-
-_BOX_KINDS = {"k_wall": "conductivity", "d_wall": "density", "c_wall": "specific_heat"}
-_BOX_KINDS |= {"r_ag": "resistance", "r_glass": "resistance", "c_internal": "capacity"}
-_BOX_KINDS |= {name: "length" for name in ("thickness", "side", "glazed_side")}
-_BOX_KINDS |= {f"h_in_{s}": "coefficient" for s in ("wall", "ceiling", "floor")}
-_BOX_KINDS |= {"h_out_a": "coefficient", "h_out_b": "wind_coefficient", "ua_leak": "conductance"}
-"""Kinds of the box constants; the others (t_w, emissivities, absorptivity, albedo) are [-]."""
-
-
-class BoxSimulator(_SimulatorBase):
-    """``type = "box"``: the built-in test box (:class:`bayescal.simulators.box.TestBox`)."""
-
-    type: Literal["box"] = _f("Simulator type.", "box")
-    mode: Literal["coheating", "freefloat"] = _f(
-        "'coheating': indoor air temperature imposed, heating power computed; 'freefloat': "
-        "indoor air temperature computed (heat_input optional).",
-        "coheating",
-    )
-    latitude: float = _f("Site latitude, north positive. [°]", 50.69, ge=-90, le=90)
-    longitude: float = _f("Site longitude, east positive. [°]", 4.53, ge=-180, le=180)
-    altitude: float = _f("Site altitude. [m]", 100.0, default=0.0)
-    window_azimuth: float = _f(
-        "Azimuth the window faces, clockwise from north (180 = south). [°]",
-        180.0,
-        default=180.0,
-        ge=0,
-        lt=360,
-    )
-    constants: dict[str, float] = _f(
-        "Values overriding the box's nominal constants (bayescal.simulators.box.DEFAULTS: "
-        "k_wall [W/(m·K)], d_wall [kg/m³], c_wall [J/(kg·K)], r_ag [m²·K/W], t_w [-], "
-        "emissivity [-], absorptivity [-], geometry and surface coefficients).",
-        {"c_wall": 800.0, "emissivity": 0.85},
-        default_factory=dict,
-    )
-    cells: int = _f("Finite-volume cells across the wall.", 20, default=20, ge=1)
-    max_step: float = _f("Longest time step. [s]", 600.0, default=600.0, gt=0)
-    sky_model: Literal["isotropic", "haydavies", "perez"] = _f(
-        "Sky-diffuse transposition model.", "perez", default="haydavies"
-    )
-
-    @field_validator("constants")
-    @classmethod
-    def _known_constants(cls, value: dict[str, float]) -> dict[str, float]:
-        from bayescal.simulators.box import DEFAULTS
-
-        for name in value:
-            if name not in DEFAULTS:
-                raise ValueError(f"{name!r} is not a box constant{_suggest(name, list(DEFAULTS))}")
-        return value
-
-    def target_kinds(self) -> dict[str, str]:
-        from bayescal.simulators.box import DEFAULTS
-
-        return {name: _BOX_KINDS.get(name, "dimensionless") for name in DEFAULTS}
-
-    def output_names(self) -> tuple[str, ...]:
-        return ("heating_power",) if self.mode == "coheating" else ("temp_air_in",)
-
-    def input_names(self) -> tuple[str, ...]:
-        control = ("temp_air_in",) if self.mode == "coheating" else ()
-        return ("temp_air_out", "ghi", "dhi", "wind_speed", *control)
-
-
-SimulatorSection = Annotated[Union[WallSimulator, BoxSimulator], Field(discriminator="type")]  # noqa: UP007
-"""The simulator union; a new simulator type is one more class here."""
-
-
 # --------------------------------------------------------------------------- [parameters]
 
 
@@ -557,9 +352,12 @@ class Parameter(_Section):
     )
     targets: list[str] = _f(
         "What the value sets: 'layer.property' or r_si, r_se, solar_absorptance (wall); a "
-        "constant name (box). Several targets share one value.",
+        "constant name (box); 'ObjectType:ObjectName:Field' (energyplus; a name holding ':' "
+        "in double quotes); a template placeholder (command); an FMU variable (fmu). Several "
+        "targets share one value.",
         ["concrete.conductivity"],
         ["board_out.specific_heat", "board_in.specific_heat"],
+        ["Material:AeratedConcrete:Conductivity"],
         min_length=1,
     )
     description: str = _f("Text for reports.", "conductivity of the blocks", default="")
@@ -687,6 +485,31 @@ class DiscrepancySection(_Section):
     update_interval: int = _f("MCMC iterations between updates.", 100, default=100, ge=1)
 
 
+class PredictSection(_Section):
+    """``[predict]``: calibrated predictions on the training and test windows."""
+
+    draws: int = _f(
+        "Posterior draws (thinned evenly over all chains) propagated through the emulator.",
+        300,
+        default=300,
+        ge=20,
+    )
+    level: float = _f("Probability of the prediction band. [-]", 0.95, default=0.95, gt=0, lt=1)
+    method: Literal["emulator", "simulator"] = _f(
+        "Calibrated predictions from the emulator at `draws` posterior draws, or from "
+        "the simulator re-run at `runs` posterior draws (exact physics, honest on test "
+        "periods whose conditions the training periods did not span; costs `runs` runs).",
+        "simulator",
+        default="emulator",
+    )
+    runs: int = _f(
+        "Posterior draws at which the simulator is re-run (method = 'simulator').",
+        50,
+        default=50,
+        ge=10,
+    )
+
+
 class RunnerSection(_Section):
     """``[runner]``: where simulator runs execute."""
 
@@ -715,8 +538,9 @@ class RunnerSection(_Section):
 class Study(_Section):
     """A validated study file; build it with :func:`load_study`.
 
-    ``data.file`` and ``study.output_dir`` are absolute (relative ones were
-    resolved against the study folder :attr:`root`); :attr:`path` is the file.
+    ``data.file``, ``study.output_dir`` and the simulator's paths (model,
+    weather or FMU file) are absolute (relative ones were resolved against
+    the study folder :attr:`root`); :attr:`path` is the file.
     """
 
     study: StudySection = _f("Name, output folder and seed.")
@@ -729,6 +553,7 @@ class Study(_Section):
     emulator: EmulatorSection = _f("Emulator.", default_factory=EmulatorSection)
     calibration: CalibrationSection = _f("Calibration MCMC.", default_factory=CalibrationSection)
     discrepancy: DiscrepancySection = _f("Difference process.", default_factory=DiscrepancySection)
+    predict: PredictSection = _f("Predictions with bands.", default_factory=PredictSection)
     runner: RunnerSection = _f("Simulation runner.", default_factory=RunnerSection)
 
     _root: Path = PrivateAttr(default_factory=Path.cwd)
@@ -777,30 +602,35 @@ class Study(_Section):
         folder keeps the hash; changing any value changes it.
         """
         dumped = self.model_dump(mode="json")
-        for section, key in (("data", "file"), ("study", "output_dir")):
+        keys = [("data", "file"), ("study", "output_dir")]
+        keys += [("simulator", key) for key in self.simulator.path_keys]
+        for section, key in keys:
             path = Path(dumped[section][key])
-            if path.is_relative_to(self.root):
+            if path.is_absolute() and path.is_relative_to(self.root):
                 dumped[section][key] = path.relative_to(self.root).as_posix()
         text = json.dumps(dumped, sort_keys=True, separators=(",", ":"), ensure_ascii=False)
         return hashlib.sha256(text.encode()).hexdigest()
 
 
 def _target_problems(study: Study) -> list[str]:
-    kinds = study.simulator.target_kinds()
+    simulator = study.simulator
     problems: list[str] = []
     owner: dict[str, str] = {}
     for name, parameter in study.parameters.items():
         key = f"parameters.{name}"
+        kinds: set[str] = set()
         for target in parameter.targets:
-            if target in owner:
-                problems.append(f"{key}.targets: {target!r} is already set by {owner[target]!r}")
-            owner[target] = name
-            if kinds is not None and target not in kinds:
-                problems.append(
-                    f"{key}.targets: {target!r} is not a target of the {study.simulator.type} "
-                    f"simulator{_suggest(target, sorted(kinds))}"
-                )
-        found = sorted({kinds[t] for t in parameter.targets if t in kinds} if kinds else set())
+            try:
+                kind = simulator.target_kind(target)
+                canonical = simulator.target_key(target)
+            except ValueError as exc:
+                problems.append(f"{key}.targets: {exc}")
+                continue
+            if canonical in owner:
+                problems.append(f"{key}.targets: {target!r} is already set by {owner[canonical]!r}")
+            owner[canonical] = name
+            kinds |= {kind} if kind is not None else set()
+        found = sorted(kinds)
         if len(found) > 1:
             problems.append(f"{key}.targets: mixes quantities of different kinds {found}")
         elif found and _normal_unit(parameter.unit) not in _KIND_UNITS[found[0]][0]:

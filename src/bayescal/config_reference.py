@@ -27,6 +27,16 @@ _SECTIONS: list[tuple[str, type[BaseModel], str]] = [
     ('[simulator] type = "wall"', cfg.WallSimulator, ""),
     ("[[simulator.layers]]", cfg.LayerSpec, "one table per layer, outside to inside"),
     ('[simulator] type = "box"', cfg.BoxSimulator, ""),
+    ('[simulator] type = "energyplus"', cfg.EnergyPlusSection, ""),
+    (
+        "[simulator.schedules.<glossary name>]",
+        cfg.EnergyPlusSchedule,
+        "energyplus; or just the Schedule:File name",
+    ),
+    ("[simulator.outputs.<name>]", cfg.EnergyPlusOutput, ""),
+    ('[simulator] type = "command"', cfg.CommandSection, ""),
+    ("[simulator.outputs]", cfg.CommandOutputs, ""),
+    ('[simulator] type = "fmu"', cfg.FmuSection, ""),
     ("[parameters.<name>]", cfg.Parameter, ""),
     ('prior = { distribution = "uniform", ... }', cfg.UniformPrior, ""),
     ('prior = { distribution = "beta", ... }', cfg.BetaPrior, ""),
@@ -36,6 +46,7 @@ _SECTIONS: list[tuple[str, type[BaseModel], str]] = [
     ("[emulator]", cfg.EmulatorSection, ""),
     ("[calibration]", cfg.CalibrationSection, ""),
     ("[discrepancy]", cfg.DiscrepancySection, ""),
+    ("[predict]", cfg.PredictSection, ""),
     ("[runner]", cfg.RunnerSection, ""),
 ]
 

@@ -14,7 +14,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from bayescal.config import BoxSimulator, Study, WallSimulator
+from bayescal.config import (
+    BoxSimulator,
+    CommandSection,
+    EnergyPlusSection,
+    FmuSection,
+    Study,
+    WallSimulator,
+)
+from bayescal.config_simulators import parse_energyplus_target
 from bayescal.errors import ConfigError
 from bayescal.simulators.base import Forcing, Simulator, check_parameters
 from bayescal.simulators.fvm import Layer
@@ -101,19 +109,95 @@ def _box(section: BoxSimulator, study: Study) -> Simulator:
     return TargetedSimulator(box, targets)
 
 
+def _energyplus(section: EnergyPlusSection, study: Study) -> Simulator:
+    from bayescal.simulators.energyplus import (
+        EnergyPlusSimulator,
+        FieldTarget,
+        ScheduleInput,
+    )
+
+    parameters = {
+        name: [FieldTarget(*parse_energyplus_target(t)) for t in p.targets]
+        for name, p in study.parameters.items()
+    }
+    return EnergyPlusSimulator(
+        section.model,
+        parameters=parameters,
+        schedules={
+            n: ScheduleInput(s.schedule, s.lead_steps) for n, s in section.schedules.items()
+        },
+        outputs={n: (o.variable, o.key, o.scale) for n, o in section.outputs.items()},
+        weather=section.weather,
+        timesteps_per_hour=section.timesteps_per_hour,
+        algorithm=section.algorithm,
+        warmup_days=section.warmup_days,
+        timeout=section.timeout,
+    )
+
+
+def _command(section: CommandSection, study: Study) -> Simulator:
+    from bayescal.simulators.command import CommandSimulator
+
+    targets = {name: tuple(p.targets) for name, p in study.parameters.items()}
+    nominal = {t: p.nominal for p in study.parameters.values() for t in p.targets}
+    command = CommandSimulator(
+        section.command,
+        base_dir=study.root,
+        parameters=tuple(nominal),
+        outputs=section.outputs.columns,
+        templates=section.templates,
+        inputs=section.inputs,
+        output_file=section.outputs.file,
+        time_column=section.outputs.time_column,
+        nominal=nominal,
+        timeout=section.timeout,
+        env=section.env,
+    )
+    return TargetedSimulator(command, targets)
+
+
+def _fmu(section: FmuSection, study: Study) -> Simulator:
+    from bayescal.simulators.fmu import FmuSimulator
+
+    return FmuSimulator(
+        section.fmu,
+        parameters={name: tuple(p.targets) for name, p in study.parameters.items()},
+        inputs=section.inputs,
+        outputs=section.outputs,
+        start_values=section.start_values,
+        units=section.units,
+        start_time=section.start_time,
+        substeps=section.substeps,
+        tolerance=section.tolerance,
+    )
+
+
 def build_simulator(study: Study) -> Simulator:
     """The simulator of ``study``, taking the study's parameter names.
+
+    Files the study names (EnergyPlus model, templates, program, FMU) are
+    read here, so problems in them surface now, before any run.
 
     Raises
     ------
     ConfigError
-        If the simulator type has no builder.
+        If the simulator type has no builder, or (command, FMU) for a
+        template, program or variable the files do not have.
+    SimulatorError
+        If an EnergyPlus model or an FMU cannot be read, or lacks an object,
+        schedule or variable the study names.
     """
     section = study.simulator
     if isinstance(section, WallSimulator):
         return _wall(section, study)
     if isinstance(section, BoxSimulator):
         return _box(section, study)
+    if isinstance(section, EnergyPlusSection):
+        return _energyplus(section, study)
+    if isinstance(section, CommandSection):
+        return _command(section, study)
+    if isinstance(section, FmuSection):
+        return _fmu(section, study)
     raise ConfigError(f"simulator.type {section.type!r} cannot be built yet")
 
 
