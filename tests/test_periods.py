@@ -10,21 +10,30 @@ from bayescal.periods import layout_periods
 def test_paper_wall_layout() -> None:
     # The paper's wall: 1500 half-hourly values, last 300 test, daily periods of 48.
     lay = layout_periods(1500, 48, warmup=0, test=300)
-    assert lay.m_star == 25
-    assert lay.train_starts[0] == 0
-    assert lay.train_starts[-1] + 48 == 1200 == lay.test_begin
-    # 300 test samples need 7 periods of 48; they end at the end of the record.
+    # 300 test samples need 7 periods of 48, ending at the end of the record.
     assert lay.test_starts.size == 7
     assert lay.test_starts[-1] + 48 == 1500
-    assert lay.test_starts[0] <= lay.test_begin
+    assert lay.test_starts[0] <= lay.test_begin == 1200
+    # Training periods lie on the same grid (same time of day) and end where the
+    # first test period starts: 1500 - 7 * 48 = 1164 = 24 * 48 + 12.
+    assert lay.m_star == 24
+    assert lay.train_starts[-1] + 48 == lay.test_starts[0] == 1164
+    assert np.all((lay.train_starts - lay.test_starts[0]) % 48 == 0)
 
 
 def test_leftover_samples_join_the_warmup() -> None:
     lay = layout_periods(1000, 48, warmup=100, test=200)
-    # 700 training samples -> 14 whole periods (672), the 28 left over precede them.
-    assert lay.m_star == 14
-    assert lay.train_starts[0] == 100 + 28
-    assert lay.train_starts[-1] + 48 == 800
+    # 5 test periods end at 1000 (start 760); 660 samples after the warm-up before
+    # them hold 13 whole periods (624); the 36 left over join the warm-up.
+    assert lay.m_star == 13
+    assert lay.train_starts[0] == 100 + 36
+    assert lay.train_starts[-1] + 48 == 760 == lay.test_starts[0]
+
+
+def test_test_window_in_whole_periods_keeps_every_training_sample() -> None:
+    lay = layout_periods(1000, 50, warmup=100, test=200)
+    assert lay.test_starts[0] == lay.test_begin == 800
+    assert lay.train_starts[0] == 100 and lay.m_star == 14
 
 
 def test_cut_shapes_and_values() -> None:
@@ -52,7 +61,7 @@ def test_periods_with_missing_samples_are_dropped() -> None:
 
 
 def test_too_short_record_is_a_clear_error() -> None:
-    with pytest.raises(DataError, match=r"record has 50 samples but .* need 62"):
+    with pytest.raises(DataError, match=r"record has 50 samples but .* need 106"):
         layout_periods(50, 48, warmup=10, test=4)
 
 

@@ -240,3 +240,112 @@ def copy_example(example: str, target: Path, *, force: bool = False) -> Path:
         ignore=shutil.ignore_patterns("out", "__pycache__"),
     )
     return target
+
+
+def _mcmc_bar(quiet: bool) -> Any:
+    """Factory of tqdm bars for MCMC progress: ``(label, total) -> (tick, close)``."""
+    from tqdm.auto import tqdm
+
+    def factory(label: str, total: int) -> tuple[Callable[[int], None], Callable[[], None]]:
+        bar = tqdm(total=total, desc=label, unit="it", disable=quiet, mininterval=0.5)
+
+        def tick(done: int) -> None:
+            bar.update(max(0, min(done, total) - bar.n))
+
+        return tick, bar.close
+
+    return factory
+
+
+@main.command()
+@STUDY
+@click.option(
+    "--from",
+    "from_stage",
+    type=click.Choice(
+        ["design", "simulate", "emulator", "calibrate", "discrepancy", "predict", "report"]
+    ),
+    default=None,
+    help="Run this stage and every later one again, even if up to date.",
+)
+@click.option(
+    "--until",
+    type=click.Choice(
+        ["design", "simulate", "emulator", "calibrate", "discrepancy", "predict", "report"]
+    ),
+    default="report",
+    show_default=True,
+    help="Stop after this stage.",
+)
+@click.option("--jobs", "-j", type=click.IntRange(min=1), default=None, help="Simulation workers.")
+@click.option(
+    "--backend",
+    type=click.Choice(["serial", "processes", "dask"]),
+    default=None,
+    help="Simulation backend [default: the study's runner.backend].",
+)
+@click.option("--scheduler", default=None, help="Dask scheduler address (implies --backend dask).")
+@click.option("--quiet", "-q", is_flag=True, help="No progress bars or notes; errors only.")
+@user_errors
+def run(
+    study: Path,
+    from_stage: str | None,
+    until: str,
+    jobs: int | None,
+    backend: str | None,
+    scheduler: str | None,
+    quiet: bool,
+) -> None:
+    """Calibrate: design, simulate, emulator, calibrate, discrepancy, predict, report.
+
+    Every stage writes its results into the study's output folder; running
+    again reuses stages whose inputs did not change and resumes interrupted
+    simulations. A log is kept in OUTPUT_DIR/bayescal.log.
+    """
+    from bayescal.config import load_study
+    from bayescal.pipeline import Options, describe
+    from bayescal.pipeline import run as run_pipeline
+    from bayescal.runner import tqdm_progress
+
+    config = load_study(study)
+    options = Options(
+        backend=backend,
+        jobs=jobs,
+        scheduler=scheduler,
+        progress=None if quiet else tqdm_progress,
+        mcmc_progress=_mcmc_bar(quiet),
+    )
+    res = run_pipeline(
+        config,
+        from_stage=from_stage,
+        until=until,
+        options=options,
+        say=(lambda _: None) if quiet else click.echo,
+    )
+    if not quiet:
+        click.echo(describe(res))
+        if res.report is not None:
+            click.echo(f"report: {res.report}")
+
+
+@main.command()
+@STUDY
+@user_errors
+def show(study: Path) -> None:
+    """Summarise a finished calibration: posterior, diagnostics, metrics."""
+    from bayescal.config import load_study
+    from bayescal.pipeline import describe, load_results
+
+    click.echo(describe(load_results(load_study(study))))
+
+
+@main.command()
+@STUDY
+@user_errors
+def report(study: Path) -> None:
+    """(Re)write the HTML report of a finished calibration."""
+    from bayescal.config import load_study
+    from bayescal.pipeline import load_results, write_study_report
+
+    path = write_study_report(load_results(load_study(study)))
+    click.echo(f"report: {path}")

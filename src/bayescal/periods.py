@@ -4,15 +4,15 @@ The record of ``n_total`` samples on the study clock is laid out as::
 
     | warm-up (+ leftover) | period 1 | period 2 | ... | period m* | test window |
 
-The test window is the last ``test`` samples. The training window between the
-warm-up and the test window is cut into whole periods of ``period`` samples;
-the periods are aligned to end where the test window starts, so samples that do
-not fill a whole period join the warm-up (they are simulated, never used).
-Periods that contain missing measurements are dropped and listed.
-
-For prediction the test window is covered by periods of the same length that
-end at the end of the record; the first of them may reach back into the
-training window (its overlap is predicted but not scored).
+The test window is the last ``test`` samples. All periods lie on one grid
+anchored at the end of the record, so every period starts at the same time of
+day (or phase of whatever cycle the period length follows): the test window is
+covered by the last ``ceil(test / period)`` periods, the first of which may
+reach back into the training window (its overlap is predicted but neither
+trained on nor scored); the training periods are the whole periods of the grid
+before it, after the warm-up. Samples before the first training period join
+the warm-up (simulated, never used). Periods that contain missing
+measurements are dropped and listed.
 """
 
 from __future__ import annotations
@@ -126,16 +126,21 @@ def layout_periods(
         raise DataError(f"a period must hold at least 2 samples, got {period}")
     if warmup < 0 or test < 0:
         raise DataError(f"warm-up and test window must be >= 0 samples, got {warmup} and {test}")
-    needed = warmup + period + test
+    n_test_periods = -(-test // period) if test > 0 else 0
+    needed = warmup + period * (1 + n_test_periods)
     if n_total < needed:
         raise DataError(
             f"the record has {n_total} samples but warm-up ({warmup}) + one period ({period}) "
-            f"+ test window ({test}) need {needed}",
+            f"+ the {n_test_periods} whole period(s) covering the test window ({test}) "
+            f"need {needed}",
             hint="use a longer record, a shorter warm-up or period, or a smaller test window",
         )
-    test_begin = n_total - test
-    n_periods = (test_begin - warmup) // period
-    first = test_begin - n_periods * period
+    # One grid of periods anchored at the end of the record, so that the periods
+    # covering the test window have the same phase (time of day) as the
+    # training periods; training periods end before the first of them.
+    end_train = n_total - period * n_test_periods
+    n_periods = (end_train - warmup) // period
+    first = end_train - n_periods * period
     starts = first + period * np.arange(n_periods)
     if missing is not None:
         missing = np.asarray(missing, dtype=bool)
@@ -149,7 +154,6 @@ def layout_periods(
             f"all {n_periods} training periods contain missing measurements",
             hint="allow interpolation of short gaps (data.max_gap_interpolate) or fix the data",
         )
-    n_test_periods = -(-test // period) if test > 0 else 0
     test_starts = n_total - period * np.arange(n_test_periods, 0, -1)
     return PeriodLayout(
         n_total=n_total,

@@ -235,12 +235,14 @@ def layout_for(
     else:
         test = round(float(periods.test_fraction or 0.0) * n_samples)
     length, warmup = _samples(periods.length, step), _samples(periods.warmup, step)
-    need = warmup + length + test
+    cover = length * (-(-test // length)) if test > 0 else 0
+    need = warmup + length + cover
     if n_samples < need:
         raise DataError(
             f"the record is {format_duration(n_samples * step)} ({n_samples} samples) long; it "
             f"must be at least {format_duration(need * step)} ({need} samples): warm-up "
-            f"{warmup} + one period {length} + test window {test} samples",
+            f"{warmup} + one period {length} + the whole periods covering the test window "
+            f"{cover} samples",
             hint="use a longer record, or shorten [periods] warmup, length or the test window",
         )
     return layout_periods(n_samples, length, warmup, test, missing)

@@ -1,0 +1,547 @@
+"""The end-to-end calibration: study file -> design -> ... -> report.
+
+:func:`run` executes the stages of :mod:`bayescal.pipeline.stages` in order,
+writing each stage's artefacts into the study's output folder atomically and
+recording the stage in ``stages.json`` (:mod:`bayescal.pipeline.state`).
+Running again reuses every stage whose key (settings and inputs) is unchanged
+and whose files exist; ``from_stage`` forces that stage and all later ones.
+The simulation runner additionally caches every finished run, so a killed
+``simulate`` stage resumes where it stopped.
+
+Output folder::
+
+    design.csv              Latin hypercube, physical and normalised
+    simulations/            per-run cache (runs/*.npz, failures/*.json)
+    simulations.npz/.json   the successful runs stacked, the failures listed
+    emulator.nc             basis, standardisation, hyperparameters and draws
+    emulator-cv.npz         leave-one-run-out cross-validation
+    posterior.nc            theta*, lambda, lambda* draws (ArviZ groups)
+    discrepancy.nc          the difference process (when enabled)
+    predictions.nc          measured, nominal, calibrated (+ Delta) series
+    metrics.csv             fit metrics per output, model and window
+    report/report.html      the report (figures in report/figures/)
+    stages.json             what finished, with which key
+    bayescal.log            the log of every run
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+import pandas as pd
+import xarray as xr
+
+from bayescal.artefacts import load_emulator, load_posterior, save_emulator, save_posterior
+from bayescal.calibration.posterior import Posterior
+from bayescal.config import Study
+from bayescal.design import Design
+from bayescal.emulator.gp import LooResult
+from bayescal.errors import ConfigError
+from bayescal.io import (
+    atomic_write,
+    atomic_write_json,
+    atomic_write_npz,
+    atomic_write_text,
+    read_json,
+    read_npz,
+)
+from bayescal.pipeline.stages import (
+    Context,
+    EmulatorResult,
+    Options,
+    Predictions,
+    assemble_runs,
+    build_emulator,
+    calibrate_stage,
+    discrepancy_stage,
+    make_design,
+    nominal_run,
+    predict_stage,
+    prepare,
+)
+from bayescal.pipeline.state import STAGES, StageLog, digest, file_logger
+from bayescal.runner import RunFailure, RunResults, forcing_fingerprint, simulator_fingerprint
+
+if TYPE_CHECKING:
+    from bayescal.discrepancy import Discrepancy
+
+__all__ = ["STAGES", "Options", "Results", "run", "stage_keys"]
+
+Say = Callable[[str], None]
+
+
+@dataclass
+class Results:
+    """What a run produced (stages not reached are ``None``)."""
+
+    context: Context
+    design: Design | None = None
+    simulations: RunResults | None = None
+    emulator: EmulatorResult | None = None
+    posterior: Posterior | None = None
+    discrepancy: Discrepancy | None = None
+    predictions: Predictions | None = None
+    report: Path | None = None
+    reused: tuple[str, ...] = ()
+    ran: tuple[str, ...] = ()
+
+
+def _measured_key(ctx: Context) -> str:
+    m = ctx.measured
+    layout = dataclasses.asdict(m.layout)
+    return digest(forcing_fingerprint(m.forcing), dict(m.outputs), layout, m.times)
+
+
+def stage_keys(ctx: Context) -> dict[str, str]:
+    """The key of every stage for the study as it is now."""
+    s = ctx.study
+    dump = s.model_dump(mode="json")
+    keys: dict[str, str] = {}
+    keys["design"] = digest("design", dump["parameters"], dump["design"], s.study.seed)
+    keys["simulate"] = digest(
+        "simulate",
+        keys["design"],
+        simulator_fingerprint(ctx.simulator),
+        forcing_fingerprint(ctx.measured.forcing),
+        dump["runner"]["retries"],
+        dump["runner"]["timeout"],
+    )
+    keys["emulator"] = digest(
+        "emulator", keys["simulate"], _measured_key(ctx), dump["outputs"], dump["emulator"]
+    )
+    keys["calibrate"] = digest("calibrate", keys["emulator"], dump["calibration"])
+    keys["discrepancy"] = digest("discrepancy", keys["calibrate"], dump["discrepancy"])
+    keys["predict"] = digest(
+        "predict",
+        keys["discrepancy"],
+        dump["predict"],
+        {n: p.nominal for n, p in s.parameters.items()},
+    )
+    keys["report"] = digest("report", keys["predict"], s.study.name, s.study.description)
+    return keys
+
+
+# ---------------------------------------------------------------- artefact files
+
+
+def _save_simulations(out: Path, sims: RunResults) -> list[str]:
+    arrays: dict[str, Any] = {f"output:{k}": v for k, v in sims.outputs.items()}
+    arrays["indices"] = sims.indices
+    atomic_write_npz(out / "simulations.npz", arrays)
+    meta = {
+        "keys": list(sims.keys),
+        "failures": [dataclasses.asdict(f) for f in sims.failures],
+        "n_run": sims.n_run,
+        "n_cached": sims.n_cached,
+        "n_attempts": sims.n_attempts,
+    }
+    atomic_write_json(out / "simulations.json", meta)
+    return ["simulations.npz", "simulations.json"]
+
+
+def _load_simulations(out: Path, design: Design) -> RunResults:
+    arrays = read_npz(out / "simulations.npz")
+    meta = read_json(out / "simulations.json")
+    outputs = {k.split(":", 1)[1]: v for k, v in arrays.items() if k.startswith("output:")}
+    return RunResults(
+        design=design,
+        indices=arrays["indices"],
+        outputs=outputs,
+        keys=tuple(meta["keys"]),
+        failures=tuple(RunFailure(**f) for f in meta["failures"]),
+        n_run=0,
+        n_cached=int(arrays["indices"].size),
+        n_attempts=0,
+    )
+
+
+def _save_loo(path: Path, loo: LooResult) -> None:
+    names = list(loo.rmse)
+    atomic_write_npz(
+        path,
+        {
+            "names": np.array(names),
+            "rmse": np.array([loo.rmse[n] for n in names]),
+            "output_sd": np.array([loo.output_sd[n] for n in names]),
+            "rmse_run": loo.rmse_run,
+            "z": loo.z,
+        },
+    )
+
+
+def _load_loo(path: Path) -> LooResult:
+    a = read_npz(path)
+    names = [str(n) for n in a["names"]]
+    return LooResult(
+        rmse=dict(zip(names, map(float, a["rmse"]), strict=True)),
+        output_sd=dict(zip(names, map(float, a["output_sd"]), strict=True)),
+        rmse_run=a["rmse_run"],
+        z=a["z"],
+    )
+
+
+def _save_dataset(path: Path, ds: xr.Dataset) -> None:
+    def write(f: Any) -> None:
+        f.write(ds.to_netcdf())
+
+    atomic_write(path, write)
+
+
+def _load_dataset(path: Path) -> xr.Dataset:
+    with xr.open_dataset(path) as ds:
+        return ds.load()
+
+
+# ---------------------------------------------------------------- the stages
+
+
+class _Runner:
+    """Runs or reuses each stage and records it."""
+
+    def __init__(self, ctx: Context, force_from: str | None, say: Say) -> None:
+        self.ctx = ctx
+        self.out = ctx.out
+        self.out.mkdir(parents=True, exist_ok=True)
+        self.log = StageLog.open(self.out)
+        self.logger = file_logger(self.out)
+        self.keys = stage_keys(ctx)
+        self.say = say
+        self.reused: list[str] = []
+        self.ran: list[str] = []
+        self.stale = False
+        if force_from is not None:
+            self.log.forget_from(force_from)
+
+    def reuse(self, stage: str) -> bool:
+        """Whether ``stage`` can be read back (and nothing before it was redone)."""
+        ok = not self.stale and self.log.done(stage, self.keys[stage])
+        if ok:
+            self.reused.append(stage)
+            self._note(f"{stage}: up to date, reused")
+        else:
+            self.stale = True
+            self._note(f"{stage}: running")
+        return ok
+
+    def finish(self, stage: str, files: list[str], start: float) -> None:
+        seconds = time.perf_counter() - start
+        self.log.finish(stage, self.keys[stage], files, seconds)
+        self.ran.append(stage)
+        self._note(f"{stage}: done in {seconds:.1f} s")
+
+    def _note(self, text: str) -> None:
+        self.logger.info(text)
+        self.say(text)
+
+
+def _design(r: _Runner) -> Design:
+    path = r.out / "design.csv"
+    if r.reuse("design"):
+        return Design.load(path)
+    start = time.perf_counter()
+    design = make_design(r.ctx)
+    design.save(path)
+    r.finish("design", ["design.csv"], start)
+    return design
+
+
+def _simulations(r: _Runner, design: Design) -> RunResults:
+    if r.reuse("simulate"):
+        return _load_simulations(r.out, design)
+    start = time.perf_counter()
+    from bayescal.pipeline.stages import simulate
+
+    sims = simulate(r.ctx, design)
+    for f in sims.failures:
+        r.logger.warning("run %d failed (%s): %s", f.index, f.error_type, f.message)
+    if sims.failures:
+        r.say(f"simulate: {len(sims.failures)} of {design.runs} runs failed and are dropped")
+    files = _save_simulations(r.out, sims)
+    r.finish("simulate", files, start)
+    return sims
+
+
+def _emulator(r: _Runner, sims: RunResults) -> EmulatorResult:
+    if r.reuse("emulator"):
+        assembled = assemble_runs(r.ctx, sims)
+        return EmulatorResult(
+            assembled, load_emulator(r.out / "emulator.nc"), _load_loo(r.out / "emulator-cv.npz")
+        )
+    start = time.perf_counter()
+    em = build_emulator(r.ctx, sims)
+    save_emulator(em.emulator, r.out / "emulator.nc", r.ctx.study.config_hash())
+    _save_loo(r.out / "emulator-cv.npz", em.loo)
+    for name, rmse in em.loo.rmse.items():
+        r.say(
+            f"emulator: leave-one-run-out RMSE of {name} {rmse:.4g} "
+            f"(output SD {em.loo.output_sd[name]:.4g}); {em.emulator.basis.p} basis vectors"
+        )
+    r.finish("emulator", ["emulator.nc", "emulator-cv.npz"], start)
+    return em
+
+
+def _calibration(r: _Runner, em: EmulatorResult) -> Posterior:
+    if r.reuse("calibrate"):
+        return load_posterior(r.out / "posterior.nc")
+    start = time.perf_counter()
+    post = calibrate_stage(r.ctx, em)
+    save_posterior(post, r.out / "posterior.nc", r.ctx.study.config_hash())
+    atomic_write_text(r.out / "posterior-summary.csv", post.summary().to_csv())
+    for w in post.warnings:
+        r.logger.warning("calibration: %s", w)
+        r.say(f"warning: {w}")
+    r.finish("calibrate", ["posterior.nc", "posterior-summary.csv"], start)
+    return post
+
+
+def _discrepancy(r: _Runner, em: EmulatorResult, post: Posterior) -> Discrepancy | None:
+    if not r.ctx.study.discrepancy.enabled:
+        if not r.reuse("discrepancy"):
+            r.finish("discrepancy", [], time.perf_counter())
+        return None
+    from bayescal.discrepancy import load_discrepancy, save_discrepancy
+
+    if r.reuse("discrepancy"):
+        return load_discrepancy(r.out / "discrepancy.nc")
+    start = time.perf_counter()
+    disc = discrepancy_stage(r.ctx, em, post)
+    assert disc is not None  # enabled above
+    save_discrepancy(disc, r.out / "discrepancy.nc")
+    r.finish("discrepancy", ["discrepancy.nc"], start)
+    return disc
+
+
+def _predictions(
+    r: _Runner, em: EmulatorResult, post: Posterior, disc: Discrepancy | None
+) -> Predictions:
+    if r.reuse("predict"):
+        ds = _load_dataset(r.out / "predictions.nc")
+        return Predictions(ds, pd.read_csv(r.out / "metrics.csv"))
+    start = time.perf_counter()
+    pred = predict_stage(r.ctx, em, post, disc, nominal_run(r.ctx))
+    _save_dataset(r.out / "predictions.nc", pred.dataset)
+    atomic_write_text(r.out / "metrics.csv", pred.metrics.to_csv(index=False))
+    r.finish("predict", ["predictions.nc", "metrics.csv"], start)
+    return pred
+
+
+def _report(r: _Runner, res: Results) -> Path:
+    target = r.out / "report" / "report.html"
+    if r.reuse("report"):
+        return target
+    start = time.perf_counter()
+    path = write_study_report(res)
+    r.finish("report", [str(path.relative_to(r.out))], start)
+    return path
+
+
+def write_study_report(res: Results) -> Path:
+    """Write the HTML report of a finished run into ``out/report/``."""
+    from bayescal.report.html import ReportInputs, write_report
+
+    if res.emulator is None or res.posterior is None or res.predictions is None:
+        raise ConfigError("the report needs the emulator, calibrate and predict stages")
+    ctx, study = res.context, res.context.study
+    disc = res.discrepancy
+    warnings = list(res.posterior.warnings)
+    sims = res.simulations
+    if sims is not None and sims.failures:
+        warnings.append(f"{len(sims.failures)} simulator run(s) failed and were dropped")
+    inputs = ReportInputs(
+        study_name=study.study.name,
+        description=study.study.description,
+        config_hash=study.config_hash(),
+        design=res.design if res.design is not None else sims.design,  # type: ignore[union-attr]
+        failures=tuple(sims.failures) if sims is not None else (),
+        emulator=res.emulator.emulator,
+        loo=res.emulator.loo,
+        posterior=res.posterior,
+        discrepancy_posterior=None if disc is None else disc.posterior,
+        predictions=res.predictions.dataset,
+        metrics=res.predictions.metrics,
+        delta_correlation=None if disc is None else _delta_correlation(res),
+        delta_explained=None if disc is None else dict(disc.explained),
+        warnings=tuple(warnings),
+        settings=_settings(res),
+    )
+    return write_report(inputs, ctx.out / "report")
+
+
+def _delta_correlation(res: Results) -> pd.DataFrame:
+    """Pearson correlation of Delta with each boundary condition over the training samples."""
+    assert res.predictions is not None
+    ds = res.predictions.dataset
+    train = ds["window"].values == "train"
+    outputs = ds.attrs["outputs"].split(",")
+    boundary = [b for b in ds.attrs["boundary"].split(",") if b]
+    table = {}
+    for o in outputs:
+        d = ds[f"{o}_delta"].values[train]
+        row = {}
+        for b in boundary:
+            v = ds[f"bc_{b}"].values[train]
+            ok = np.isfinite(d) & np.isfinite(v)
+            sd = np.std(d[ok]) * np.std(v[ok]) if ok.sum() > 2 else 0.0
+            row[b] = float(np.corrcoef(d[ok], v[ok])[0, 1]) if sd > 0 else float("nan")
+        table[o] = row
+    return pd.DataFrame(table).T
+
+
+def _settings(res: Results) -> dict[str, object]:
+    s = res.context.study
+    em = res.emulator
+    out: dict[str, object] = {
+        "simulator": s.simulator.type,
+        "runs (design)": s.design.runs,
+        "training periods m*": res.context.measured.layout.m_star,
+        "samples per period": res.context.measured.layout.period,
+        "test samples": res.context.measured.layout.test,
+        "emulator MCMC (burn + kept, 2 chains)": f"{s.emulator.burn} + {s.emulator.samples}",
+        "calibration MCMC": f"{s.calibration.chains} chains x ({s.calibration.burn} + "
+        f"{s.calibration.samples})",
+        "algebra": s.emulator.algebra,
+        "discrepancy": s.discrepancy.enabled,
+        "seed": s.study.seed,
+    }
+    if em is not None:
+        out["basis vectors p"] = em.emulator.basis.p
+        out["variable inputs x"] = ", ".join(em.emulator.inputs.labels)
+    return out
+
+
+def run(
+    study: Study,
+    *,
+    from_stage: str | None = None,
+    until: str = "report",
+    options: Options | None = None,
+    say: Say | None = None,
+) -> Results:
+    """Run (or resume) a study's calibration.
+
+    Parameters
+    ----------
+    study
+        A validated study (:func:`bayescal.config.load_study`).
+    from_stage
+        Force this stage and every later one to run again.
+    until
+        Last stage to run.
+    options
+        Backends, workers and progress callbacks (they do not change results).
+    say
+        Receives one-line progress notes (default: discarded).
+
+    Returns
+    -------
+    Results
+    """
+    for name, value in (("from_stage", from_stage), ("until", until)):
+        if value is not None and value not in STAGES:
+            raise ConfigError(f"{name} must be one of {', '.join(STAGES)}, got {value!r}")
+    ctx = prepare(study, options)
+    r = _Runner(ctx, from_stage, say or (lambda _: None))
+    r.logger.info("bayescal run of %s (config %s)", study.path, study.config_hash()[:12])
+    res = Results(ctx)
+    last = STAGES.index(until)
+    steps: list[tuple[str, Callable[[], None]]] = [
+        ("design", lambda: setattr(res, "design", _design(r))),
+        ("simulate", lambda: setattr(res, "simulations", _simulations(r, _need(res.design)))),
+        ("emulator", lambda: setattr(res, "emulator", _emulator(r, _need(res.simulations)))),
+        ("calibrate", lambda: setattr(res, "posterior", _calibration(r, _need(res.emulator)))),
+        (
+            "discrepancy",
+            lambda: setattr(
+                res, "discrepancy", _discrepancy(r, _need(res.emulator), _need(res.posterior))
+            ),
+        ),
+        (
+            "predict",
+            lambda: setattr(
+                res,
+                "predictions",
+                _predictions(r, _need(res.emulator), _need(res.posterior), res.discrepancy),
+            ),
+        ),
+        ("report", lambda: setattr(res, "report", _report(r, res))),
+    ]
+    for i, (_, step) in enumerate(steps):
+        if i > last:
+            break
+        step()
+    res.reused, res.ran = tuple(r.reused), tuple(r.ran)
+    return res
+
+
+def _need(value: Any) -> Any:
+    if value is None:  # pragma: no cover - the stages run in order
+        raise RuntimeError("a stage ran before the stage it depends on")
+    return value
+
+
+def load_results(study: Study) -> Results:
+    """Read back the artefacts of a finished run without running anything.
+
+    Raises
+    ------
+    ConfigError
+        If the study has not been run up to the prediction stage.
+    """
+    ctx = prepare(study)
+    out = ctx.out
+    needed = ["design.csv", "simulations.npz", "emulator.nc", "posterior.nc", "predictions.nc"]
+    missing = [f for f in needed if not (out / f).exists()]
+    if missing:
+        raise ConfigError(
+            f"{out} has no finished calibration (missing {', '.join(missing)})",
+            hint=f"run `bayescal run {study.path}` first",
+        )
+    design = Design.load(out / "design.csv")
+    sims = _load_simulations(out, design)
+    em = EmulatorResult(
+        assemble_runs(ctx, sims),
+        load_emulator(out / "emulator.nc"),
+        _load_loo(out / "emulator-cv.npz"),
+    )
+    disc = None
+    if (out / "discrepancy.nc").exists() and study.discrepancy.enabled:
+        from bayescal.discrepancy import load_discrepancy
+
+        disc = load_discrepancy(out / "discrepancy.nc")
+    pred = Predictions(_load_dataset(out / "predictions.nc"), pd.read_csv(out / "metrics.csv"))
+    return Results(ctx, design, sims, em, load_posterior(out / "posterior.nc"), disc, pred)
+
+
+def describe(res: Results) -> str:
+    """A terminal summary: posterior table, diagnostics, metrics."""
+    lines = [f"study {res.context.study.study.name!r} -> {res.context.out}"]
+    if res.posterior is not None:
+        table = res.posterior.summary()
+        lines += ["", "posterior (physical units):", table.to_string(float_format="{:.5g}".format)]
+        if res.posterior.warnings:
+            lines += ["", "diagnostics: NOT all passed"]
+            lines += [f"  warning: {w}" for w in res.posterior.warnings]
+        else:
+            lines += ["", "diagnostics: all passed (R-hat <= 1.01, bulk and tail ESS >= 400)"]
+    if res.emulator is not None:
+        for name, rmse in res.emulator.loo.rmse.items():
+            lines.append(
+                f"emulator leave-one-run-out RMSE of {name}: {rmse:.4g} "
+                f"(output SD {res.emulator.loo.output_sd[name]:.4g})"
+            )
+    if res.predictions is not None:
+        m = res.predictions.metrics
+        cols = ["output", "model", "window", "mse", "rmse", "mean_abs_error", "max_abs_error"]
+        cols += ["cv_rmse", "nmbe", "coverage95"]
+        lines += ["", "metrics (max_abs_error is the paper's 'MAE'; CV(RMSE), NMBE in %):"]
+        lines.append(m[cols].to_string(index=False, float_format="{:.4g}".format))
+    if res.simulations is not None and res.simulations.failures:
+        lines += ["", f"{len(res.simulations.failures)} failed run(s):"]
+        lines += [f"  run {f.index}: {f.error_type}: {f.message}" for f in res.simulations.failures]
+    return "\n".join(lines)

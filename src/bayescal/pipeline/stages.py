@@ -1,0 +1,387 @@
+"""The stages of a calibration as plain functions, each of the previous result.
+
+::
+
+    ctx = prepare(load_study("study.toml"))
+    design = make_design(ctx)
+    sims = simulate(ctx, design)
+    em = build_emulator(ctx, sims)
+    post = calibrate_stage(ctx, em)
+    disc = discrepancy_stage(ctx, em, post)          # None unless enabled
+    pred = predict_stage(ctx, em, post, disc)
+
+:func:`bayescal.pipeline.run` chains them with caching of finished stages in
+the study's output folder; these functions compute and never write, except
+the simulation runner's per-run cache.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+import pandas as pd
+import xarray as xr
+
+from bayescal.calibration.posterior import Posterior, calibrate
+from bayescal.config import Study
+from bayescal.data.measured import MeasuredData, load_measured
+from bayescal.design import Design, Prior, latin_hypercube, prior_from_spec
+from bayescal.emulator.assemble import Assembled, assemble
+from bayescal.emulator.gp import Emulator, LooResult, train
+from bayescal.errors import SimulatorError
+from bayescal.pipeline.predict import (
+    Band,
+    delta_series,
+    metrics_table,
+    predict_band,
+    predictions_dataset,
+    simulator_band,
+)
+from bayescal.pipeline.state import derived_seed
+from bayescal.runner import Progress, RunResults, run_design
+from bayescal.simulators.base import Simulator
+from bayescal.simulators.factory import build_simulator, nominal_parameters
+
+if TYPE_CHECKING:
+    from bayescal.discrepancy import Discrepancy
+
+__all__ = [
+    "Context",
+    "EmulatorResult",
+    "Options",
+    "Predictions",
+    "build_emulator",
+    "calibrate_stage",
+    "discrepancy_stage",
+    "make_design",
+    "predict_stage",
+    "prepare",
+    "simulate",
+    "study_priors",
+]
+
+Tick = Callable[[int], None]
+
+
+@dataclass(frozen=True)
+class Options:
+    """Run-time choices that do not change results (so they are not in any stage key).
+
+    Attributes
+    ----------
+    backend
+        Simulation backend; the study's ``[runner] backend`` if ``None``.
+    jobs
+        Parallel simulation workers; the study's if ``None``.
+    scheduler
+        Dask scheduler address (implies the dask backend).
+    chains_backend
+        ``"processes"`` (MCMC chains in parallel) or ``"serial"``.
+    progress
+        Factory of a simulation progress callback: ``total -> (progress, close)``
+        (see :func:`bayescal.runner.tqdm_progress`), called only when runs are due.
+    mcmc_progress
+        Factory of an MCMC progress callback: ``(description, total) -> (tick, close)``.
+    """
+
+    backend: str | None = None
+    jobs: int | None = None
+    scheduler: str | None = None
+    chains_backend: str = "processes"
+    progress: Callable[[int], tuple[Progress, Callable[[], None]]] | None = None
+    mcmc_progress: Callable[[str, int], tuple[Tick, Callable[[], None]]] | None = None
+
+
+@dataclass(frozen=True)
+class Context:
+    """A loaded study: configuration, measured data, simulator and output folder."""
+
+    study: Study
+    measured: MeasuredData
+    simulator: Simulator
+    out: Path
+    options: Options
+
+    @property
+    def priors(self) -> dict[str, Prior]:
+        """The study's priors, in parameter order."""
+        return study_priors(self.study)
+
+    def seed(self, stage: str, explicit: int | None = None) -> int:
+        """The stage's seed: ``explicit`` or derived from the master seed."""
+        return int(explicit) if explicit is not None else derived_seed(self.study.study.seed, stage)
+
+
+def study_priors(study: Study) -> dict[str, Prior]:
+    """Parameter name -> prior (:mod:`bayescal.design` objects) of a study."""
+    out: dict[str, Prior] = {}
+    for name, p in study.parameters.items():
+        spec = p.prior
+        a, b = getattr(spec, "a", None), getattr(spec, "b", None)
+        out[name] = prior_from_spec(spec.distribution, spec.lower, spec.upper, a, b)
+    return out
+
+
+def prepare(study: Study, options: Options | None = None) -> Context:
+    """Load the measured data and build the simulator (errors surface here, before any run)."""
+    measured = load_measured(study)
+    simulator = build_simulator(study)
+    out = study.root / study.study.output_dir
+    return Context(study, measured, simulator, out, options or Options())
+
+
+def make_design(ctx: Context) -> Design:
+    """The Latin hypercube of ``[design]`` over the priors' bounds."""
+    section = ctx.study.design
+    optimization = None if section.optimization == "none" else section.optimization
+    seed = ctx.seed("design", section.seed)
+    return latin_hypercube(ctx.priors, section.runs, seed, optimization)
+
+
+def _runner_options(ctx: Context) -> dict[str, Any]:
+    runner, opt = ctx.study.runner, ctx.options
+    backend = opt.backend or ("dask" if opt.scheduler else runner.backend)
+    return {
+        "backend": backend,
+        "jobs": opt.jobs or runner.jobs,
+        "scheduler": opt.scheduler or runner.scheduler,
+        "timeout": runner.timeout,
+        "retries": runner.retries,
+    }
+
+
+def simulate(ctx: Context, design: Design) -> RunResults:
+    """Run the design (cached per run in ``out/simulations``); too many failures raise.
+
+    Raises
+    ------
+    SimulatorError
+        If fewer than ``t + 2`` runs succeeded (the emulator needs them).
+    """
+    factory = ctx.options.progress
+    progress, close = factory(design.runs) if factory is not None else (None, lambda: None)
+    try:
+        results = run_design(
+            ctx.simulator,
+            ctx.measured.forcing,
+            design,
+            cache_dir=ctx.out / "simulations",
+            progress=progress,
+            **_runner_options(ctx),
+        )
+    finally:
+        close()
+    need = len(design.names) + 2
+    ok = design.runs - results.n_failed
+    if ok < need:
+        first = results.failures[0] if results.failures else None
+        detail = f"; first error: {first.message}" if first else ""
+        raise SimulatorError(
+            f"only {ok} of {design.runs} simulator runs succeeded, at least {need} are needed"
+            f"{detail}",
+            hint=f"see {ctx.out / 'simulations' / 'failures'} for every failed run",
+        )
+    return results
+
+
+def nominal_run(ctx: Context) -> dict[str, np.ndarray]:
+    """The simulator at the nominal parameter values (through the run cache)."""
+    nominal = nominal_parameters(ctx.study)
+    design = Design.from_values(ctx.priors, [[nominal[n] for n in ctx.priors]])
+    options = _runner_options(ctx) | {"backend": "serial"}
+    options.pop("jobs")
+    options.pop("scheduler")
+    res = run_design(
+        ctx.simulator,
+        ctx.measured.forcing,
+        design,
+        cache_dir=ctx.out / "simulations",
+        **options,
+    )
+    if res.failures:
+        raise SimulatorError(f"the nominal run failed: {res.failures[0].message}")
+    return {name: values[0] for name, values in res.outputs.items()}
+
+
+@dataclass(frozen=True)
+class EmulatorResult:
+    """The assembled data, the trained emulator and its cross-validation."""
+
+    assembled: Assembled
+    emulator: Emulator
+    loo: LooResult
+
+
+def assemble_runs(ctx: Context, sims: RunResults) -> Assembled:
+    """Cut, standardise and project the successful runs and the measurements."""
+    design = Design(sims.design.priors, sims.unit, seed=sims.design.seed)
+    section = ctx.study.emulator
+    return assemble(
+        design,
+        sims.outputs,
+        ctx.measured.outputs,
+        ctx.measured.forcing.series,
+        ctx.measured.layout,
+        outputs=ctx.study.outputs.calibrate,
+        variance=section.pca_variance,
+        components=section.pca_components,
+        input_variance=section.input_pca_variance,
+    )
+
+
+def _mcmc_tick(ctx: Context, what: str, total: int) -> tuple[Tick | None, Callable[[], None]]:
+    factory = ctx.options.mcmc_progress
+    if factory is None:
+        return None, lambda: None
+    return factory(what, total)
+
+
+def build_emulator(ctx: Context, sims: RunResults) -> EmulatorResult:
+    """Assemble, train the emulator (MwG + MAP) and cross-validate it."""
+    assembled = assemble_runs(ctx, sims)
+    section = ctx.study.emulator
+    n_chains = 2
+    tick, close = _mcmc_tick(ctx, "emulator", n_chains * (section.burn + section.samples))
+    try:
+        emulator = train(
+            assembled,
+            n_burn=section.burn,
+            n_draws=section.samples,
+            n_chains=n_chains,
+            seed=ctx.seed("emulator"),
+            backend=ctx.options.chains_backend,  # type: ignore[arg-type]
+            callback=tick,
+        )
+    finally:
+        close()
+    return EmulatorResult(assembled, emulator, emulator.loo_cv())
+
+
+def calibrate_stage(
+    ctx: Context, em: EmulatorResult, priors: dict[str, Prior] | None = None
+) -> Posterior:
+    """Sample theta*, lambda and lambda* (``[calibration]``)."""
+    section = ctx.study.calibration
+    total = section.chains * (section.burn + section.samples)
+    tick, close = _mcmc_tick(ctx, "calibration", total)
+    try:
+        return calibrate(
+            em.emulator,
+            em.assembled,
+            priors,
+            n_chains=section.chains,
+            n_burn=section.burn,
+            n_draws=section.samples,
+            seed=ctx.seed("calibrate", section.seed),
+            backend=ctx.options.chains_backend,  # type: ignore[arg-type]
+            algebra=ctx.study.emulator.algebra,
+            callback=tick,
+        )
+    finally:
+        close()
+
+
+def discrepancy_stage(ctx: Context, em: EmulatorResult, posterior: Posterior) -> Discrepancy | None:
+    """The difference process (``[discrepancy] enabled``), else ``None``."""
+    section = ctx.study.discrepancy
+    if not section.enabled:
+        return None
+    from bayescal.discrepancy import estimate_discrepancy
+
+    cal = ctx.study.calibration
+    tick, close = _mcmc_tick(ctx, "discrepancy", cal.chains * (cal.burn + cal.samples))
+    try:
+        return estimate_discrepancy(
+            em.emulator,
+            em.assembled,
+            posterior,
+            realisations=section.realisations,
+            update_interval=section.update_interval,
+            n_chains=cal.chains,
+            n_burn=cal.burn,
+            n_draws=cal.samples,
+            seed=ctx.seed("discrepancy"),
+            backend=ctx.options.chains_backend,
+            callback=tick,
+        )
+    finally:
+        close()
+
+
+@dataclass(frozen=True)
+class Predictions:
+    """Series on the study clock and the metrics table."""
+
+    dataset: xr.Dataset
+    metrics: pd.DataFrame
+
+
+def predict_stage(
+    ctx: Context,
+    em: EmulatorResult,
+    posterior: Posterior,
+    discrepancy: Discrepancy | None = None,
+    nominal: dict[str, np.ndarray] | None = None,
+) -> Predictions:
+    """Nominal, calibrated (and corrected) predictions with bands, and their metrics."""
+    section = ctx.study.predict
+    band = _band(ctx, em, posterior, None)
+    corrected = delta = None
+    if discrepancy is not None:
+        corrected = _band(ctx, em, discrepancy.posterior, discrepancy)
+        delta = delta_series(em.assembled, discrepancy, list(em.emulator.outputs.names))
+    m = ctx.measured
+    ds = predictions_dataset(
+        m.times,
+        m.layout,
+        {o: m.outputs[o] for o in ctx.study.outputs.calibrate},
+        nominal if nominal is not None else nominal_run(ctx),
+        band,
+        m.forcing.series,
+        corrected,
+        delta,
+        attrs={"level": section.level, "study": ctx.study.study.name},
+    )
+    return Predictions(ds, metrics_table(ds))
+
+
+def posterior_runs(
+    ctx: Context, posterior: Posterior, n: int
+) -> tuple[dict[str, np.ndarray], np.ndarray]:
+    """The simulator at ``n`` posterior draws (thinned evenly): outputs and their lambda*."""
+    theta = posterior.draws.reshape(-1, len(posterior.names))
+    lam_star = posterior.lam_star.reshape(-1)
+    pick = np.unique(np.linspace(0, theta.shape[0] - 1, min(n, theta.shape[0])).astype(int))
+    design = Design.from_values(ctx.priors, theta[pick])
+    res = simulate(ctx, design)
+    return res.outputs, lam_star[pick][res.indices]
+
+
+def _band(
+    ctx: Context, em: EmulatorResult, posterior: Posterior, discrepancy: Discrepancy | None
+) -> Band:
+    section = ctx.study.predict
+    seed = ctx.seed("predict")
+    if section.method == "simulator":
+        runs, lam_star = posterior_runs(ctx, posterior, section.runs)
+        return simulator_band(
+            em.assembled,
+            {o: runs[o] for o in em.emulator.outputs.names},
+            lam_star,
+            level=section.level,
+            seed=seed,
+            discrepancy=discrepancy,
+        )
+    return predict_band(
+        em.emulator,
+        em.assembled,
+        posterior,
+        draws=section.draws,
+        level=section.level,
+        seed=seed,
+        discrepancy=discrepancy,
+    )

@@ -1,0 +1,155 @@
+"""The end-to-end pipeline on the wall example: stages, caching, forcing, CLI."""
+
+from __future__ import annotations
+
+import json
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from bayescal.cli import main
+from bayescal.config import load_study
+from bayescal.demo import TRUTH
+from bayescal.errors import ConfigError
+from bayescal.pipeline import Options, Results, load_results, run
+from bayescal.pipeline.state import STAGES
+
+SERIAL = Options(backend="serial", chains_backend="serial")
+#: Short chains: enough for the sharply identified parameters of the example.
+FAST = """
+[emulator]
+pca_variance = 0.999
+burn = 200
+samples = 200
+
+[calibration]
+chains = 4
+burn = 400
+samples = 600
+
+[predict]
+method = "{method}"
+runs = 20
+draws = 100
+"""
+
+
+def _study(tmp_path: Path, method: str = "simulator") -> Path:
+    runner = CliRunner()
+    target = tmp_path / "wall"
+    result = runner.invoke(main, ["init", "wall", str(target)])
+    assert result.exit_code == 0, result.output
+    text = (target / "study.toml").read_text(encoding="utf-8")
+    cut = text.index("[emulator]")
+    (target / "study.toml").write_text(text[:cut] + FAST.format(method=method), "utf-8")
+    return target
+
+
+@pytest.fixture(scope="module")
+def first(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Results]:
+    folder = _study(tmp_path_factory.mktemp("pipeline"))
+    return folder, run(load_study(folder), until="predict", options=SERIAL)
+
+
+def test_every_stage_runs_and_writes_its_files(first: tuple[Path, Results]) -> None:
+    folder, res = first
+    assert res.ran == STAGES[: STAGES.index("predict") + 1]
+    out = folder / "out"
+    for name in ("design.csv", "simulations.npz", "emulator.nc", "posterior.nc"):
+        assert (out / name).is_file(), name
+    record = json.loads((out / "stages.json").read_text())
+    assert set(record) == set(res.ran)
+    assert "calibrate: done" in (out / "bayescal.log").read_text()
+
+
+def test_the_truth_is_covered_and_the_fit_reaches_the_noise(first: tuple[Path, Results]) -> None:
+    _, res = first
+    assert res.posterior is not None and res.predictions is not None
+    lower, upper = res.posterior.interval(0.95)
+    # The example is a virtual experiment with known truth (examples/wall/data/README.md).
+    for k, name in enumerate(res.posterior.names):
+        if name in ("k_cb", "cp_cb"):
+            assert lower[k] <= TRUTH[name] <= upper[k], name
+    m = res.predictions.metrics.set_index(["model", "window"])
+    # The measured flux carries noise of variance 0.007 (W/m²)²; the calibrated
+    # simulator must reach it on both windows within its sampling error plus the
+    # ~1e-4 CTF-versus-finite-volume difference (same bound as test_simulate_cli).
+    for window in ("train", "test"):
+        assert m.loc[("calibrated", window), "mse"] == pytest.approx(0.007, abs=2e-3)
+        assert m.loc[("calibrated", window), "mse"] < m.loc[("nominal", window), "mse"]
+        assert m.loc[("calibrated", window), "coverage95"] >= 0.9
+
+
+def test_predictions_dataset_follows_the_layout(first: tuple[Path, Results]) -> None:
+    _, res = first
+    assert res.predictions is not None
+    ds = res.predictions.dataset
+    windows = ds["window"].values
+    cal = ds["heat_flux_in_calibrated"].values
+    assert np.all(np.isnan(cal[windows == "warmup"]))
+    assert np.all(np.isfinite(cal[(windows == "train") | (windows == "test")]))
+    lo, hi = ds["heat_flux_in_calibrated_lower"].values, ds["heat_flux_in_calibrated_upper"].values
+    ok = np.isfinite(cal)
+    assert np.all(lo[ok] <= cal[ok]) and np.all(cal[ok] <= hi[ok])
+
+
+def test_second_run_reuses_everything(first: tuple[Path, Results]) -> None:
+    folder, res = first
+    again = run(load_study(folder), until="predict", options=SERIAL)
+    assert again.ran == ()
+    assert again.reused == res.ran
+    assert again.posterior is not None and res.posterior is not None
+    np.testing.assert_array_equal(again.posterior.draws, res.posterior.draws)
+
+
+def test_a_changed_setting_reruns_only_later_stages(tmp_path: Path) -> None:
+    folder = _study(tmp_path, method="emulator")
+    run(load_study(folder), until="calibrate", options=SERIAL)
+    runs_before = sorted((folder / "out" / "simulations" / "runs").iterdir())
+    path = folder / "study.toml"
+    path.write_text(path.read_text().replace("samples = 600", "samples = 500"), "utf-8")
+    res = run(load_study(folder), until="predict", options=SERIAL)
+    assert res.reused == ("design", "simulate", "emulator")
+    assert res.ran == ("calibrate", "discrepancy", "predict")
+    assert res.posterior is not None and res.posterior.draws.shape[1] == 500
+    # Emulator predictions: no posterior runs were added to the run cache.
+    runs_after = sorted((folder / "out" / "simulations" / "runs").iterdir())
+    assert set(runs_before) < set(runs_after)
+    assert len(runs_after) == len(runs_before) + 1  # the nominal run only
+    forced = run(load_study(folder), from_stage="emulator", until="emulator", options=SERIAL)
+    assert forced.ran == ("emulator",) and forced.reused == ("design", "simulate")
+
+
+def test_unknown_stage_is_a_config_error(first: tuple[Path, Results]) -> None:
+    folder, _ = first
+    with pytest.raises(ConfigError, match="from_stage must be one of design, simulate"):
+        run(load_study(folder), from_stage="bogus")
+
+
+def test_cli_show_and_errors(first: tuple[Path, Results], tmp_path: Path) -> None:
+    folder, _ = first
+    runner = CliRunner()
+    shown = runner.invoke(main, ["show", str(folder)])
+    assert shown.exit_code == 0, shown.output
+    assert re.search(r"k_cb\s+0\.12", shown.output)
+    assert "max_abs_error is the paper's 'MAE'" in shown.output
+    empty = _study(tmp_path)
+    result = runner.invoke(main, ["show", str(empty)])
+    assert result.exit_code == 2
+    assert result.output.count("\n") == 1 and "has no finished calibration" in result.output
+    bad = runner.invoke(main, ["run", str(folder), "--from", "nowhere"])
+    assert bad.exit_code == 2 and "Traceback" not in bad.output
+
+
+def test_load_results_matches_the_run(first: tuple[Path, Results]) -> None:
+    folder, res = first
+    loaded = load_results(load_study(folder))
+    assert loaded.posterior is not None and res.posterior is not None
+    np.testing.assert_array_equal(loaded.posterior.draws, res.posterior.draws)
+    assert loaded.predictions is not None and res.predictions is not None
+    np.testing.assert_allclose(
+        loaded.predictions.metrics["mse"].to_numpy(), res.predictions.metrics["mse"].to_numpy()
+    )
