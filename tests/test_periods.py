@@ -33,7 +33,8 @@ def test_leftover_samples_join_the_warmup() -> None:
 def test_test_window_in_whole_periods_keeps_every_training_sample() -> None:
     lay = layout_periods(1000, 50, warmup=100, test=200)
     assert lay.test_starts[0] == lay.test_begin == 800
-    assert lay.train_starts[0] == 100 and lay.m_star == 14
+    assert lay.train_starts[0] == 100
+    assert lay.m_star == 14
 
 
 def test_cut_shapes_and_values() -> None:

@@ -67,7 +67,8 @@ def test_every_stage_runs_and_writes_its_files(first: tuple[Path, Results]) -> N
 
 def test_the_truth_is_covered_and_the_fit_reaches_the_noise(first: tuple[Path, Results]) -> None:
     _, res = first
-    assert res.posterior is not None and res.predictions is not None
+    assert res.posterior is not None
+    assert res.predictions is not None
     lower, upper = res.posterior.interval(0.95)
     # The example is a virtual experiment with known truth (examples/wall/data/README.md).
     for k, name in enumerate(res.posterior.names):
@@ -93,7 +94,8 @@ def test_predictions_dataset_follows_the_layout(first: tuple[Path, Results]) -> 
     assert np.all(np.isfinite(cal[(windows == "train") | (windows == "test")]))
     lo, hi = ds["heat_flux_in_calibrated_lower"].values, ds["heat_flux_in_calibrated_upper"].values
     ok = np.isfinite(cal)
-    assert np.all(lo[ok] <= cal[ok]) and np.all(cal[ok] <= hi[ok])
+    assert np.all(lo[ok] <= cal[ok])
+    assert np.all(cal[ok] <= hi[ok])
 
 
 def test_second_run_reuses_everything(first: tuple[Path, Results]) -> None:
@@ -101,7 +103,8 @@ def test_second_run_reuses_everything(first: tuple[Path, Results]) -> None:
     again = run(load_study(folder), until="predict", options=SERIAL)
     assert again.ran == ()
     assert again.reused == res.ran
-    assert again.posterior is not None and res.posterior is not None
+    assert again.posterior is not None
+    assert res.posterior is not None
     np.testing.assert_array_equal(again.posterior.draws, res.posterior.draws)
 
 
@@ -114,13 +117,15 @@ def test_a_changed_setting_reruns_only_later_stages(tmp_path: Path) -> None:
     res = run(load_study(folder), until="predict", options=SERIAL)
     assert res.reused == ("design", "simulate", "emulator")
     assert res.ran == ("calibrate", "discrepancy", "predict")
-    assert res.posterior is not None and res.posterior.draws.shape[1] == 500
+    assert res.posterior is not None
+    assert res.posterior.draws.shape[1] == 500
     # Emulator predictions: no posterior runs were added to the run cache.
     runs_after = sorted((folder / "out" / "simulations" / "runs").iterdir())
     assert set(runs_before) < set(runs_after)
     assert len(runs_after) == len(runs_before) + 1  # the nominal run only
     forced = run(load_study(folder), from_stage="emulator", until="emulator", options=SERIAL)
-    assert forced.ran == ("emulator",) and forced.reused == ("design", "simulate")
+    assert forced.ran == ("emulator",)
+    assert forced.reused == ("design", "simulate")
 
 
 def test_unknown_stage_is_a_config_error(first: tuple[Path, Results]) -> None:
@@ -139,17 +144,21 @@ def test_cli_show_and_errors(first: tuple[Path, Results], tmp_path: Path) -> Non
     empty = _study(tmp_path)
     result = runner.invoke(main, ["show", str(empty)])
     assert result.exit_code == 2
-    assert result.output.count("\n") == 1 and "has no finished calibration" in result.output
+    assert result.output.count("\n") == 1
+    assert "has no finished calibration" in result.output
     bad = runner.invoke(main, ["run", str(folder), "--from", "nowhere"])
-    assert bad.exit_code == 2 and "Traceback" not in bad.output
+    assert bad.exit_code == 2
+    assert "Traceback" not in bad.output
 
 
 def test_load_results_matches_the_run(first: tuple[Path, Results]) -> None:
     folder, res = first
     loaded = load_results(load_study(folder))
-    assert loaded.posterior is not None and res.posterior is not None
+    assert loaded.posterior is not None
+    assert res.posterior is not None
     np.testing.assert_array_equal(loaded.posterior.draws, res.posterior.draws)
-    assert loaded.predictions is not None and res.predictions is not None
+    assert loaded.predictions is not None
+    assert res.predictions is not None
     np.testing.assert_allclose(
         loaded.predictions.metrics["mse"].to_numpy(), res.predictions.metrics["mse"].to_numpy()
     )
