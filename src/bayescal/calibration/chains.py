@@ -10,16 +10,19 @@ functions or instances of module-level classes.
 
 from __future__ import annotations
 
+import os
 import pickle
 from collections.abc import Callable, Sequence
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from dataclasses import dataclass
 from multiprocessing import Manager
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from bayescal.calibration.checkpoint import ChainCheckpoint
 from bayescal.calibration.samplers.base import Callback, LogDensity, Sampler, SamplerResult
 from bayescal.errors import ConfigError
 
@@ -123,6 +126,8 @@ def run_chains(
     parallel: bool = True,
     max_workers: int | None = None,
     callback: Callback | None = None,
+    checkpoint_dir: str | os.PathLike[str] | None = None,
+    checkpoint_seconds: float = 30.0,
 ) -> Chains:
     """Run ``n_chains`` chains of ``sampler`` and collect them.
 
@@ -152,6 +157,13 @@ def run_chains(
         Called in this process with the iterations completed over all chains
         (the total is ``n_chains * (n_burn + n_draws * thin)``); from worker
         processes the count arrives in steps of about 1 % per chain.
+    checkpoint_dir
+        Folder for one snapshot per chain (``chain-<k>.npz``), written between
+        batches at most every ``checkpoint_seconds``; matching snapshots found
+        there are resumed, so a killed run continues with identical draws. The
+        sampler must accept ``checkpoint=`` (Metropolis-within-Gibbs does).
+    checkpoint_seconds
+        Minimum wall time between two snapshots of a chain. [s]
 
     Returns
     -------
@@ -160,17 +172,27 @@ def run_chains(
     start_list = _start_list(starts, n_chains)
     n_chains = len(start_list)
     children = np.random.SeedSequence(seed).spawn(n_chains)
+    checkpoints: list[ChainCheckpoint | None] = [
+        None
+        if checkpoint_dir is None
+        else ChainCheckpoint(Path(checkpoint_dir) / f"chain-{k}.npz", checkpoint_seconds)
+        for k in range(n_chains)
+    ]
     if parallel and n_chains > 1:
         _check_picklable(log_density, sampler, starts)
         results = _run_parallel(
-            sampler, log_density, start_list, n_draws, children, max_workers, callback
+            sampler, log_density, start_list, n_draws, children, max_workers, callback, checkpoints
         )
     else:
         results = []
         for k, child in enumerate(children):
             offset = k * _iterations(sampler, n_draws)
             report = None if callback is None else _Offset(callback, offset)
-            results.append(_run_one(sampler, log_density, start_list[k], n_draws, child, report))
+            results.append(
+                _run_one(
+                    sampler, log_density, start_list[k], n_draws, child, report, checkpoints[k]
+                )
+            )
     d = results[0].draws.shape[1]
     chain_names = tuple(names) if names is not None else tuple(f"x{i}" for i in range(d))
     if len(chain_names) != d:
@@ -216,10 +238,17 @@ def _run_one(
     n_draws: int,
     seed: np.random.SeedSequence,
     callback: Callback | None,
+    checkpoint: ChainCheckpoint | None = None,
 ) -> SamplerResult:
     rng = np.random.default_rng(seed)
     x0 = start(rng) if callable(start) else start
-    return sampler.run(log_density, x0, n_draws, rng, callback=callback)
+    if checkpoint is None:
+        return sampler.run(log_density, x0, n_draws, rng, callback=callback)
+    run: Any = sampler.run  # samplers with checkpoints accept the keyword
+    result: SamplerResult = run(
+        log_density, x0, n_draws, rng, callback=callback, checkpoint=checkpoint
+    )
+    return result
 
 
 @dataclass(frozen=True)
@@ -255,6 +284,7 @@ def _run_parallel(
     children: list[np.random.SeedSequence],
     max_workers: int | None,
     callback: Callback | None,
+    checkpoints: list[ChainCheckpoint | None],
 ) -> list[SamplerResult]:
     n = len(children)
     total = _iterations(sampler, n_draws)
@@ -262,7 +292,16 @@ def _run_parallel(
     with ProcessPoolExecutor(max_workers=min(workers, n)) as pool:
         if callback is None:
             futures = [
-                pool.submit(_run_one, sampler, log_density, starts[k], n_draws, children[k], None)
+                pool.submit(
+                    _run_one,
+                    sampler,
+                    log_density,
+                    starts[k],
+                    n_draws,
+                    children[k],
+                    None,
+                    checkpoints[k],
+                )
                 for k in range(n)
             ]
             return [f.result() for f in futures]
@@ -278,6 +317,7 @@ def _run_parallel(
                     n_draws,
                     children[k],
                     _QueueReporter(queue, k, every, total),
+                    checkpoints[k],
                 )
                 for k in range(n)
             ]

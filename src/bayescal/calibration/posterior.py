@@ -23,6 +23,7 @@ them).
 from __future__ import annotations
 
 import math
+import os
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Literal
@@ -293,6 +294,8 @@ def calibrate(
     algebra: Kind = "kronecker",
     sampler: SamplerKind = "mwg",
     callback: Callable[[int], None] | None = None,
+    checkpoint_dir: str | os.PathLike[str] | None = None,
+    checkpoint_seconds: float = 30.0,
 ) -> Posterior:
     """Sample theta*, lambda and lambda* (eq. 16) with the hyperparameters at the MAP.
 
@@ -318,6 +321,11 @@ def calibrate(
         ``"mwg"`` (Metropolis-within-Gibbs) or ``"block"`` (adaptive block Metropolis).
     callback
         Progress: called with the iterations completed over all chains.
+    checkpoint_dir
+        Folder for per-chain snapshots; a killed run resumes from them with
+        identical draws (see :func:`bayescal.calibration.chains.run_chains`).
+    checkpoint_seconds
+        Minimum wall time between two snapshots of a chain. [s]
 
     Returns
     -------
@@ -349,6 +357,8 @@ def calibrate(
         names=names,
         parallel=backend == "processes",
         callback=callback,
+        checkpoint_dir=checkpoint_dir,
+        checkpoint_seconds=checkpoint_seconds,
     )
     draws = chains.draws
     t = target.t

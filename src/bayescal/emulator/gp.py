@@ -49,6 +49,7 @@ simulator's out-of-basis part, eq. 3) times ``sd^2``.
 from __future__ import annotations
 
 import math
+import os
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from functools import partial
@@ -705,6 +706,8 @@ def train(
     max_iter: int = 100,
     max_adapt: float = 0.2,
     callback: Callable[[int], None] | None = None,
+    checkpoint_dir: str | os.PathLike[str] | None = None,
+    checkpoint_seconds: float = 30.0,
 ) -> Emulator:
     """Train the emulator: MwG chains over eq. 9, MAP, conditioned GP (method.md section 3).
 
@@ -732,6 +735,11 @@ def train(
         Cap of the per-batch change of a log proposal width during burn-in.
     callback
         Progress: called with the iterations completed over all chains.
+    checkpoint_dir
+        Folder for per-chain snapshots; a killed run resumes from them with
+        identical draws (see :func:`bayescal.calibration.chains.run_chains`).
+    checkpoint_seconds
+        Minimum wall time between two snapshots of a chain. [s]
 
     Returns
     -------
@@ -762,6 +770,8 @@ def train(
         names=layout.names(labels),
         parallel=backend == "processes",
         callback=callback,
+        checkpoint_dir=checkpoint_dir,
+        checkpoint_seconds=checkpoint_seconds,
     )
     best, best_score, v_map, map_score = _map(target, chains, refine, max_iter)
     beta, tau, lam = layout.unpack(v_map)

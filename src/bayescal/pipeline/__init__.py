@@ -20,6 +20,7 @@ Output folder::
     predictions.nc          measured, nominal, calibrated (+ Delta) series
     metrics.csv             fit metrics per output, model and window
     report/report.html      the report (figures in report/figures/)
+    checkpoints/            MCMC snapshots of an unfinished stage (removed when it finishes)
     stages.json             what finished, with which key
     bayescal.log            the log of every run
 """
@@ -27,6 +28,7 @@ Output folder::
 from __future__ import annotations
 
 import dataclasses
+import shutil
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -229,9 +231,14 @@ class _Runner:
             self._note(f"{stage}: running")
         return ok
 
+    def checkpoints(self, stage: str) -> Path:
+        """Folder of the MCMC snapshots of ``stage`` (its key in the name)."""
+        return self.out / "checkpoints" / f"{stage}-{self.keys[stage][:16]}"
+
     def finish(self, stage: str, files: list[str], start: float) -> None:
         seconds = time.perf_counter() - start
         self.log.finish(stage, self.keys[stage], files, seconds)
+        shutil.rmtree(self.checkpoints(stage), ignore_errors=True)
         self.ran.append(stage)
         self._note(f"{stage}: done in {seconds:.1f} s")
 
@@ -274,7 +281,7 @@ def _emulator(r: _Runner, sims: RunResults) -> EmulatorResult:
             assembled, load_emulator(r.out / "emulator.nc"), _load_loo(r.out / "emulator-cv.npz")
         )
     start = time.perf_counter()
-    em = build_emulator(r.ctx, sims)
+    em = build_emulator(r.ctx, sims, r.checkpoints("emulator"))
     save_emulator(em.emulator, r.out / "emulator.nc", r.ctx.study.config_hash())
     _save_loo(r.out / "emulator-cv.npz", em.loo)
     for name, rmse in em.loo.rmse.items():
@@ -290,7 +297,7 @@ def _calibration(r: _Runner, em: EmulatorResult) -> Posterior:
     if r.reuse("calibrate"):
         return load_posterior(r.out / "posterior.nc")
     start = time.perf_counter()
-    post = calibrate_stage(r.ctx, em)
+    post = calibrate_stage(r.ctx, em, checkpoint_dir=r.checkpoints("calibrate"))
     save_posterior(post, r.out / "posterior.nc", r.ctx.study.config_hash())
     atomic_write_text(r.out / "posterior-summary.csv", post.summary().to_csv())
     for w in post.warnings:

@@ -86,6 +86,9 @@ class Options:
         (see :func:`bayescal.runner.tqdm_progress`), called only when runs are due.
     mcmc_progress
         Factory of an MCMC progress callback: ``(description, total) -> (tick, close)``.
+    checkpoint_seconds
+        Minimum wall time between two snapshots of an MCMC chain (a killed run
+        resumes from the last one with identical draws). [s]
     """
 
     backend: str | None = None
@@ -94,6 +97,7 @@ class Options:
     chains_backend: str = "processes"
     progress: Callable[[int], tuple[Progress, Callable[[], None]]] | None = None
     mcmc_progress: Callable[[str, int], tuple[Tick, Callable[[], None]]] | None = None
+    checkpoint_seconds: float = 30.0
 
 
 @dataclass(frozen=True)
@@ -240,7 +244,9 @@ def _mcmc_tick(ctx: Context, what: str, total: int) -> tuple[Tick | None, Callab
     return factory(what, total)
 
 
-def build_emulator(ctx: Context, sims: RunResults) -> EmulatorResult:
+def build_emulator(
+    ctx: Context, sims: RunResults, checkpoint_dir: Path | None = None
+) -> EmulatorResult:
     """Assemble, train the emulator (MwG + MAP) and cross-validate it."""
     assembled = assemble_runs(ctx, sims)
     section = ctx.study.emulator
@@ -255,6 +261,8 @@ def build_emulator(ctx: Context, sims: RunResults) -> EmulatorResult:
             seed=ctx.seed("emulator"),
             backend=ctx.options.chains_backend,  # type: ignore[arg-type]
             callback=tick,
+            checkpoint_dir=checkpoint_dir,
+            checkpoint_seconds=ctx.options.checkpoint_seconds,
         )
     finally:
         close()
@@ -262,7 +270,10 @@ def build_emulator(ctx: Context, sims: RunResults) -> EmulatorResult:
 
 
 def calibrate_stage(
-    ctx: Context, em: EmulatorResult, priors: dict[str, Prior] | None = None
+    ctx: Context,
+    em: EmulatorResult,
+    priors: dict[str, Prior] | None = None,
+    checkpoint_dir: Path | None = None,
 ) -> Posterior:
     """Sample theta*, lambda and lambda* (``[calibration]``)."""
     section = ctx.study.calibration
@@ -280,6 +291,8 @@ def calibrate_stage(
             backend=ctx.options.chains_backend,  # type: ignore[arg-type]
             algebra=ctx.study.emulator.algebra,
             callback=tick,
+            checkpoint_dir=checkpoint_dir,
+            checkpoint_seconds=ctx.options.checkpoint_seconds,
         )
     finally:
         close()

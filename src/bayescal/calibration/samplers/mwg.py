@@ -28,13 +28,17 @@ sampled as separate targets.
 from __future__ import annotations
 
 import copy
+import hashlib
+import json
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from bayescal.calibration.checkpoint import ChainCheckpoint
 from bayescal.calibration.samplers.base import (
     BoundsMethod,
     Box,
@@ -121,6 +125,7 @@ class MetropolisWithinGibbs:
         n_draws: int,
         rng: np.random.Generator,
         callback: Callback | None = None,
+        checkpoint: ChainCheckpoint | None = None,
     ) -> SamplerResult:
         """Run one chain.
 
@@ -137,6 +142,9 @@ class MetropolisWithinGibbs:
         callback
             Called with the number of completed iterations after each one; the
             total is ``n_burn + n_draws * thin``.
+        checkpoint
+            Where to keep snapshots between batches; a matching snapshot found
+            there at the start is resumed (same draws as an uninterrupted run).
 
         Returns
         -------
@@ -149,26 +157,37 @@ class MetropolisWithinGibbs:
         box = Box.build(x.size, self.lower, self.upper, self.bounds)
         box.check_start(x)
         active = np.flatnonzero(~fixed_mask(self.fixed, x.size)).tolist()
-        state = self._initial_state(log_density, x, box)
         maps = [box.scalar_map(i) for i in range(x.size)]
         loop = _Loop(log_density, maps, active, box.transforms, callback)
-
-        n_done = 0
-        for n_batch, size in enumerate(_batch_sizes(self.n_burn, self.batch_size), start=1):
-            counts = [0] * x.size
-            state.accepted = counts
-            loop.block(state, rng, size, n_done, keep_every=0)
-            n_done += size
-            self._adapt(state, counts, size, active, n_batch)
-
-        state.accepted = [0] * x.size
+        burn = _batch_sizes(self.n_burn, self.batch_size)
+        batches = burn + _batch_sizes(n_draws * self.thin, self.batch_size)
+        fingerprint = _fingerprint(self, x, n_draws, rng_state)
         draws: list[NDArray[np.float64]] = []
         lps: list[float] = []
-        for size in _batch_sizes(n_draws * self.thin, self.batch_size):
-            kept = loop.block(state, rng, size, n_done, self.thin, keep_start=self.n_burn)
-            draws.extend(k[0] for k in kept)
-            lps.extend(k[1] for k in kept)
+        resumed = None if checkpoint is None else checkpoint.load(fingerprint)
+        if resumed is None:
+            state = self._initial_state(log_density, x, box)
+            first, n_done = 0, 0
+        else:
+            state, first, n_done = _restore(resumed, rng, draws, lps)
+        for index in range(first, len(batches)):
+            size = batches[index]
+            if index < len(burn):
+                counts = [0] * x.size
+                state.accepted = counts
+                loop.block(state, rng, size, n_done, keep_every=0)
+                self._adapt(state, counts, size, active, index + 1)
+                if index == len(burn) - 1:
+                    state.accepted = [0] * x.size
+            else:
+                if index == 0:
+                    state.accepted = [0] * x.size
+                kept = loop.block(state, rng, size, n_done, self.thin, keep_start=self.n_burn)
+                draws.extend(k[0] for k in kept)
+                lps.extend(k[1] for k in kept)
             n_done += size
+            if checkpoint is not None and (checkpoint.due() or index == len(batches) - 1):
+                _snapshot(checkpoint, fingerprint, state, index + 1, n_done, draws, lps, rng)
 
         acceptance = np.full(x.size, np.nan)
         acceptance[active] = np.asarray(state.accepted, dtype=float)[active] / (n_draws * self.thin)
@@ -206,6 +225,65 @@ class MetropolisWithinGibbs:
         factor_up, factor_down = math.exp(step), math.exp(-step)
         for i in active:
             state.scale[i] *= factor_up if counts[i] > self.target * size else factor_down
+
+
+def _fingerprint(
+    sampler: MetropolisWithinGibbs, x0: NDArray[np.float64], n_draws: int, rng_state: Any
+) -> str:
+    """What a snapshot must match to be resumed: settings, start and seed."""
+    text = json.dumps([repr(sampler), x0.tolist(), n_draws, rng_state], default=str)
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+def _snapshot(
+    checkpoint: ChainCheckpoint,
+    fingerprint: str,
+    state: _State,
+    next_batch: int,
+    n_done: int,
+    draws: list[NDArray[np.float64]],
+    lps: list[float],
+    rng: np.random.Generator,
+) -> None:
+    d = state.x.size
+    arrays = {
+        "x": state.x,
+        "z": np.asarray(state.z, dtype=float),
+        "log_jac": np.asarray(state.log_jac, dtype=float),
+        "scale": np.asarray(state.scale, dtype=float),
+        "accepted": np.asarray(state.accepted, dtype=np.int64),
+        "draws": np.array(draws, dtype=float).reshape(len(draws), d),
+        "lps": np.asarray(lps, dtype=float),
+    }
+    meta = {
+        "fingerprint": fingerprint,
+        "next_batch": next_batch,
+        "n_done": n_done,
+        "lp": state.lp,
+        "rng": rng.bit_generator.state,
+    }
+    checkpoint.save(arrays, meta)
+
+
+def _restore(
+    snapshot: tuple[dict[str, np.ndarray], dict[str, Any]],
+    rng: np.random.Generator,
+    draws: list[NDArray[np.float64]],
+    lps: list[float],
+) -> tuple[_State, int, int]:
+    arrays, meta = snapshot
+    rng.bit_generator.state = meta["rng"]
+    draws.extend(np.array(row, dtype=float) for row in arrays["draws"])
+    lps.extend(float(v) for v in arrays["lps"])
+    state = _State(
+        x=np.array(arrays["x"], dtype=float),
+        z=arrays["z"].tolist(),
+        log_jac=arrays["log_jac"].tolist(),
+        lp=float(meta["lp"]),
+        scale=arrays["scale"].tolist(),
+        accepted=[int(v) for v in arrays["accepted"]],
+    )
+    return state, int(meta["next_batch"]), int(meta["n_done"])
 
 
 def _batch_sizes(total: int, batch: int) -> list[int]:

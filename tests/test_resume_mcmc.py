@@ -1,0 +1,151 @@
+"""MCMC checkpoints: a chain killed midway resumes with draws identical to an uninterrupted one."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from bayescal.artefacts import load_posterior
+from bayescal.calibration.chains import run_chains
+from bayescal.calibration.samplers.mwg import MetropolisWithinGibbs
+from bayescal.cli import main
+
+SAMPLER = MetropolisWithinGibbs(n_burn=300, lower=[0.0, -np.inf], batch_size=25, max_adapt=0.1)
+
+
+class Interrupt(Exception):
+    """Stands for a kill: raised by the target after a number of evaluations."""
+
+
+class Target:
+    """A correlated 2-D target (x0 > 0) that 'dies' after ``limit`` evaluations."""
+
+    def __init__(self, limit: int | None = None) -> None:
+        self.limit, self.calls = limit, 0
+
+    def __call__(self, x: np.ndarray) -> float:
+        self.calls += 1
+        if self.limit is not None and self.calls > self.limit:
+            raise Interrupt
+        return float(-0.5 * ((np.log(x[0]) - x[1]) ** 2 / 0.1 + x[1] ** 2) - np.log(x[0]))
+
+
+def _run(target: Target, folder: Path | None) -> np.ndarray:
+    chains = run_chains(
+        SAMPLER,
+        target,
+        [[1.0, 0.0], [2.0, 0.5]],
+        500,
+        seed=11,
+        parallel=False,
+        checkpoint_dir=folder,
+        checkpoint_seconds=0.0,
+    )
+    return chains.draws
+
+
+@pytest.mark.parametrize("limit", [100, 1234, 3000])
+def test_interrupted_chains_resume_identically(tmp_path: Path, limit: int) -> None:
+    reference = _run(Target(), None)
+    with pytest.raises(Interrupt):
+        _run(Target(limit), tmp_path)
+    assert list(tmp_path.glob("chain-*.npz")), "a snapshot must exist after the interruption"
+    resumed_target = Target()
+    resumed = _run(resumed_target, tmp_path)
+    np.testing.assert_array_equal(resumed, reference)
+    # The work before the last snapshot was not redone: fewer evaluations than a fresh run
+    # (2 chains x 800 sweeps x 2 coordinates + 2 starts = 3202).
+    assert resumed_target.calls < 3202
+
+
+def test_stale_snapshot_is_ignored(tmp_path: Path) -> None:
+    _run(Target(), tmp_path)  # complete snapshots of seed 11
+    other = run_chains(
+        SAMPLER,
+        Target(),
+        [[1.0, 0.0], [2.0, 0.5]],
+        500,
+        seed=12,
+        parallel=False,
+        checkpoint_dir=tmp_path,
+        checkpoint_seconds=0.0,
+    )
+    fresh = run_chains(SAMPLER, Target(), [[1.0, 0.0], [2.0, 0.5]], 500, seed=12, parallel=False)
+    np.testing.assert_array_equal(other.draws, fresh.draws)
+
+
+SCRIPT = """
+import sys
+from bayescal.config import load_study
+from bayescal.pipeline import Options, run
+run(load_study(sys.argv[1]), until="calibrate",
+    options=Options(backend="serial", chains_backend="serial", checkpoint_seconds=0.0))
+"""
+
+FAST = """
+[emulator]
+pca_variance = 0.99
+burn = 100
+samples = 100
+
+[calibration]
+chains = 4
+burn = 600
+samples = 1500
+"""
+
+
+def _study(folder: Path) -> Path:
+    result = CliRunner().invoke(main, ["init", "wall", str(folder)])
+    assert result.exit_code == 0, result.output
+    text = (folder / "study.toml").read_text(encoding="utf-8")
+    (folder / "study.toml").write_text(text[: text.index("[emulator]")] + FAST, "utf-8")
+    return folder
+
+
+def _python(study: Path) -> subprocess.Popen[bytes]:
+    env = dict(os.environ, OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1")
+    return subprocess.Popen([sys.executable, "-c", SCRIPT, str(study)], env=env)
+
+
+@pytest.mark.slow
+def test_sigkill_in_the_calibration_stage_resumes_identically(tmp_path: Path) -> None:
+    reference = _study(tmp_path / "reference")
+    assert _python(reference).wait(timeout=600) == 0
+    expected = load_posterior(reference / "out" / "posterior.nc").draws
+
+    study = _study(tmp_path / "killed")
+    rng = np.random.default_rng(5)
+    proc = _python(study)
+    deadline = time.monotonic() + 300
+    snapshots = study / "out" / "checkpoints"
+    # Wait for the calibration's first snapshot, then kill at a random later moment.
+    while not list(snapshots.glob("calibrate-*/chain-*.npz")):
+        assert proc.poll() is None, "the run ended before the calibration checkpointed"
+        assert time.monotonic() < deadline
+        time.sleep(0.05)
+    time.sleep(float(rng.uniform(0.2, 1.5)))
+    assert proc.poll() is None, "the calibration finished before it could be killed"
+    proc.send_signal(signal.SIGKILL)
+    assert proc.wait() == -signal.SIGKILL
+    assert not (study / "out" / "posterior.nc").exists()
+    folder = study / "out" / "simulations" / "runs"
+    runs_before = sorted(p.name for p in folder.iterdir())
+    stats_before = {n: (folder / n).stat().st_mtime_ns for n in runs_before}
+    assert _python(study).wait(timeout=600) == 0
+    draws = load_posterior(study / "out" / "posterior.nc").draws
+    np.testing.assert_array_equal(draws, expected)
+    # No finished simulator run was repeated, and the snapshots are gone.
+    runs_after = sorted(p.name for p in (study / "out" / "simulations" / "runs").iterdir())
+    assert runs_after == runs_before
+    for n in runs_after:
+        assert (folder / n).stat().st_mtime_ns == stats_before[n]
+    assert not list(snapshots.glob("calibrate-*"))
