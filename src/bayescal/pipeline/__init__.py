@@ -545,8 +545,12 @@ def describe(res: Results) -> str:
     if res.predictions is not None:
         m = res.predictions.metrics
         cols = ["output", "model", "window", "mse", "rmse", "mean_abs_error", "max_abs_error"]
-        cols += ["cv_rmse", "nmbe", "coverage95"]
-        lines += ["", "metrics (max_abs_error is the paper's 'MAE'; CV(RMSE), NMBE in %):"]
+        cols += ["cv_rmse", "nmbe", "coverage95", "guideline14"]
+        lines += [
+            "",
+            "metrics (max_abs_error is the paper's 'MAE'; CV(RMSE), NMBE in %; guideline14: "
+            "CV(RMSE) <= 30 % and |NMBE| <= 10 %, ASHRAE Guideline 14 hourly):",
+        ]
         lines.append(m[cols].to_string(index=False, float_format="{:.4g}".format))
     if res.simulations is not None and res.simulations.failures:
         lines += ["", f"{len(res.simulations.failures)} failed run(s):"]

@@ -24,7 +24,9 @@ test window get the predictions of the periods covering it. Everything else
 Metrics (see :mod:`bayescal.metrics`) are computed on the samples of the
 training periods (``window = "train"``) and of the test window (``"test"``)
 where the measurement is finite; ``coverage95`` is the fraction of measured
-samples inside the band.
+samples inside the band. ``guideline14`` says whether the ASHRAE Guideline 14
+criteria for hourly data hold (CV(RMSE) <= 30 %, |NMBE| <= 10 %); they were
+written for whole-building energy use and are shown for orientation only.
 """
 
 from __future__ import annotations
@@ -55,6 +57,10 @@ __all__ = [
 
 MODELS = ("nominal", "calibrated", "calibrated+delta")
 PAIRS_PER_CHUNK = 20_000
+#: ASHRAE Guideline 14 (2014) calibration criteria for hourly data: CV(RMSE) <= 30 %
+#: and |NMBE| <= 10 % (both with p = 1 degree of freedom, see bayescal.metrics).
+G14_CV_RMSE = 30.0
+G14_NMBE = 10.0
 
 
 class DiscrepancyModel(Protocol):
@@ -353,7 +359,10 @@ def metrics_table(ds: xr.Dataset) -> pd.DataFrame:
                     ok = np.isfinite(obs[mask])
                     inside = (obs[mask] >= lo) & (obs[mask] <= hi)
                     m["coverage95"] = float(np.mean(inside[ok])) if ok.any() else float("nan")
+                m["guideline14"] = bool(
+                    abs(m["cv_rmse"]) <= G14_CV_RMSE and abs(m["nmbe"]) <= G14_NMBE
+                )
                 rows.append({"output": o, "model": model, "window": window} | m)
     columns = ["output", "model", "window", "n", "mse", "rmse", "mean_abs_error"]
-    columns += ["max_abs_error", "bias", "cv_rmse", "nmbe", "coverage95"]
+    columns += ["max_abs_error", "bias", "cv_rmse", "nmbe", "coverage95", "guideline14"]
     return pd.DataFrame(rows, columns=columns)
