@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import stat
 import subprocess
 import sys
 import textwrap
@@ -99,3 +100,13 @@ def test_process_killed_before_rename_leaves_no_partial_file(tmp_path: Path) -> 
     leftovers = _leftovers(tmp_path)
     assert len(leftovers) == 1  # the orphaned temporary file, hidden and marked .tmp
     assert leftovers[0].startswith(".run.npz.")
+
+
+def test_atomic_files_get_the_usual_permissions(tmp_path: Path) -> None:
+    # A report folder is often shared or served: files must not stay 0600 (mkstemp's mode).
+    old = os.umask(0o022)
+    try:
+        path = io.atomic_write_text(tmp_path / "report.html", "<html></html>")
+    finally:
+        os.umask(old)
+    assert stat.S_IMODE(path.stat().st_mode) == 0o644

@@ -89,6 +89,6 @@ def test_cli_user_errors_are_one_line(tmp_path: Path, args: list[str], message: 
 
 
 def test_demo_writes_figures(tmp_path: Path) -> None:
-    figures = run_demo(tmp_path / "demo")
+    figures = run_demo(tmp_path / "demo", calibrate=False, quiet=True)
     assert len(figures) == 2
     assert all(f.stat().st_size > 10_000 for f in figures)

@@ -71,6 +71,12 @@ def fsync_directory(folder: str | os.PathLike[str]) -> None:
         os.close(fd)
 
 
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
 def atomic_write(path: str | os.PathLike[str], write: Callable[[IO[bytes]], None]) -> Path:
     """Write a file atomically through a callback that writes to a binary stream.
 
@@ -90,6 +96,8 @@ def atomic_write(path: str | os.PathLike[str], write: Callable[[IO[bytes]], None
     final.parent.mkdir(parents=True, exist_ok=True)
     fd, temp_name = tempfile.mkstemp(prefix=f".{final.name}.", suffix=TEMP_SUFFIX, dir=final.parent)
     try:
+        # mkstemp creates the file 0600; give it the mode a plain open() would (umask).
+        os.fchmod(fd, 0o666 & ~_umask())
         with os.fdopen(fd, "wb") as stream:
             write(stream)
             stream.flush()
