@@ -551,6 +551,7 @@ def describe(res: Results) -> str:
             "metrics (max_abs_error is the paper's 'MAE'; CV(RMSE), NMBE in %; guideline14: "
             "CV(RMSE) <= 30 % and |NMBE| <= 10 %, ASHRAE Guideline 14 hourly):",
         ]
+        cols = [c for c in cols if c in m.columns]  # older runs lack newer columns
         lines.append(m[cols].to_string(index=False, float_format="{:.4g}".format))
     if res.simulations is not None and res.simulations.failures:
         lines += ["", f"{len(res.simulations.failures)} failed run(s):"]
