@@ -7,7 +7,9 @@ Three simulators:
 * ``busy``   - a fixed amount of CPU work per run (about 0.1 s): measures the
   parallel efficiency ``rate(2 workers) / (2 * rate(serial))``;
 * ``wall``   - the built-in :class:`~bayescal.simulators.wall.MultilayerWall`
-  over a year of half-hourly boundary conditions, if it is installed.
+  over a year of half-hourly boundary conditions;
+* ``energyplus wall`` - the paper's wall in EnergyPlus (conduction transfer
+  functions, one process per run) over 20 days, if EnergyPlus is installed.
 
 Every configuration starts from an empty cache, so times include starting
 the worker processes (the Dask ``LocalCluster`` is started once beforehand:
@@ -26,6 +28,7 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 os.environ.setdefault("MKL_NUM_THREADS", "1")
 
 import argparse
+import importlib.util
 import tempfile
 import time
 from collections.abc import Mapping
@@ -113,6 +116,23 @@ def _measure(case: Case, runs: int, **options: Any) -> Timing:
 AB = {"a": UniformPrior(0.5, 1.5), "b": UniformPrior(-1.0, 1.0)}
 
 
+def _energyplus() -> Case | None:
+    """The paper's wall in EnergyPlus (CTF), 20 days half-hourly, if EnergyPlus is installed."""
+    if importlib.util.find_spec("pyenergyplus") is None:
+        return None
+    from bayescal.simulators.energyplus import paper_wall_simulator
+
+    n = 960
+    hours = np.arange(n) / 2.0
+    series = {
+        "temp_surf_out": 2.0 + 6.0 * np.sin(2 * np.pi * hours / 24.0),
+        "temp_surf_in": 21.0 + 0.3 * np.sin(2 * np.pi * hours / 3.0),
+    }
+    forcing = Forcing(1800.0, series, np.datetime64("2013-01-15T00:00"))
+    priors = {"k_cb": UniformPrior(0.08, 0.16), "cp_cb": UniformPrior(640.0, 960.0)}
+    return Case("energyplus wall", paper_wall_simulator(), forcing, priors, 12)
+
+
 def _wall() -> Case | None:
     try:
         from bayescal.simulators.fvm import Layer
@@ -149,9 +169,7 @@ def main() -> None:
         Case("trivial", me.Trivial(), _forcing(1_500), AB, 200),
         Case("busy", me.Busy(), _forcing(1_500), AB, 40),
     ]
-    wall = _wall()
-    if wall is not None:
-        cases.append(wall)
+    cases += [case for case in (_wall(), _energyplus()) if case is not None]
 
     from distributed import LocalCluster
 
@@ -162,7 +180,7 @@ def main() -> None:
     print(f"Dask LocalCluster(2 workers) start-up: {time.perf_counter() - start:.2f} s")
     load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
     print(f"cores: {len(os.sched_getaffinity(0))}, load average before: {load:.1f}")
-    configs = {
+    configs: dict[str, dict[str, Any]] = {
         "serial": {"backend": "serial"},
         "processes x1": {"backend": "processes", "jobs": 1},
         "processes x2": {"backend": "processes", "jobs": 2},

@@ -22,7 +22,7 @@ HERE = Path(__file__).resolve().parent
 QUICK = [
     ["bench_simulators.py"],
     ["bench_algebra.py", "--skip-large-dense"],
-    ["bench_runner.py", "--quick"],
+    ["bench_runner.py", "--scale", "0.5"],
 ]
 
 
