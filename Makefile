@@ -40,5 +40,8 @@ check: $(STAMP)
 bench: $(STAMP)
 	OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 $(BIN)/python benchmarks/run_quick.py
 
+docs: $(STAMP)
+	$(BIN)/mkdocs build --strict -d site
+
 clean:
 	rm -rf $(VENV) build dist .pytest_cache .mypy_cache .ruff_cache demo-out

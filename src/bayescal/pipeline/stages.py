@@ -318,7 +318,7 @@ def discrepancy_stage(ctx: Context, em: EmulatorResult, posterior: Posterior) ->
             n_burn=cal.burn,
             n_draws=cal.samples,
             seed=ctx.seed("discrepancy"),
-            backend=ctx.options.chains_backend,
+            backend=ctx.options.chains_backend,  # type: ignore[arg-type]
             callback=tick,
         )
     finally:
