@@ -166,13 +166,19 @@ def simulate(study: Path, assignments: tuple[str, ...], out: Path | None) -> Non
     (CSV) and a measured-vs-simulated figure (PNG).
     """
     from bayescal.config import load_study
+    from bayescal.errors import ConfigError
     from bayescal.simulate import check_simulation, write_simulation
 
     config = load_study(study)
-    check = check_simulation(config, _parse_assignments(assignments))
     folder = out if out is not None else config.study.output_dir / "simulate"
+    if folder.exists() and not folder.is_dir():
+        raise ConfigError(f"{folder} exists and is not a folder", hint="give --out a folder")
+    check = check_simulation(config, _parse_assignments(assignments))
     values = ", ".join(f"{k}={v:g}" for k, v in check.parameters.items())
-    files = write_simulation(check, folder, title=f"{config.study.name}: {values}")
+    try:
+        files = write_simulation(check, folder, title=f"{config.study.name}: {values}")
+    except OSError as exc:  # a read-only folder, a full disk, a file in the way
+        raise ConfigError(f"cannot write into {folder}: {exc.strerror or exc}") from None
     click.echo(f"simulated {config.study.name!r} at {values}")
     click.echo(metrics_table(check.train, check.test))
     click.echo(f"wrote {files['csv']}\nwrote {files['png']}")

@@ -109,6 +109,13 @@ def _duration(value: object) -> timedelta:
 
 
 def _instant(value: object) -> datetime:
+    result = _parse_instant(value)
+    if not 1678 <= result.year <= 2261:  # the range of nanosecond timestamps
+        raise ValueError(f"expected a date-time between the years 1678 and 2261, got {value!r}")
+    return result
+
+
+def _parse_instant(value: object) -> datetime:
     if isinstance(value, datetime):
         return value
     if isinstance(value, date):
@@ -166,7 +173,9 @@ class ColumnSpec(_Section):
         "degC",
         "W/m2",
     )
-    scale: float = _f("Factor applied before unit conversion. [-]", 0.98, default=1.0)
+    scale: float = _f(
+        "Factor applied before unit conversion. [-]", 0.98, default=1.0, allow_inf_nan=False
+    )
     sign: Literal[1, -1] = _f(
         "-1 flips the sign after conversion (a flux measured with the opposite convention).",
         -1,
@@ -319,8 +328,8 @@ class UniformPrior(_Section):
     """Uniform prior on ``[lower, upper]``."""
 
     distribution: Literal["uniform"] = _f("Prior family.", "uniform")
-    lower: float = _f("Lower bound, in the parameter's unit.", 0.08)
-    upper: float = _f("Upper bound, in the parameter's unit.", 0.16)
+    lower: float = _f("Lower bound, in the parameter's unit.", 0.08, allow_inf_nan=False)
+    upper: float = _f("Upper bound, in the parameter's unit.", 0.16, allow_inf_nan=False)
 
     @model_validator(mode="after")
     def _bounds(self) -> UniformPrior:

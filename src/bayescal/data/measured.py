@@ -189,6 +189,39 @@ def _read(data: DataSection, sources: list[str | int]) -> tuple[pd.DataFrame, tz
     return frame, zone
 
 
+_PLAUSIBLE = {
+    # Internal units. Far outside any building measurement, so that a value beyond
+    # is a wrong unit or scale (K declared for °C data, kW/m² for W/m²), not weather.
+    "temperature": (-100.0, 150.0),  # [°C] Earth's record low is -89 °C
+    "heat_flux": (-5000.0, 5000.0),  # [W/m²] the solar constant is 1361 W/m²
+    "speed": (-120.0, 120.0),  # [m/s] the strongest gust measured is 113 m/s
+    "fraction_percent": (-10.0, 110.0),  # [%] relative humidity, with sensor overshoot
+    "pressure": (3.0e4, 1.2e5),  # [Pa] atmospheric pressure, Everest to sea-level records
+}
+
+
+def _check_plausible(name: str, spec: ColumnSpec, values: np.ndarray, source: str) -> None:
+    """A converted column far outside the physical range of its quantity is an error."""
+    quantity = glossary_quantity(name)
+    bounds = _PLAUSIBLE.get(quantity.dimension) if quantity is not None else None
+    finite = values[np.isfinite(values)]
+    if quantity is None or bounds is None or not finite.size:
+        return
+    lo, hi = bounds
+    worst = float(finite[np.argmax(np.maximum(lo - finite, finite - hi))])
+    if lo <= worst <= hi:
+        return
+    unit, dimension = quantity.unit, quantity.dimension.replace("_", " ")
+    scale = f" and scale {spec.scale:g}" if spec.scale != 1.0 else ""
+    raise DataError(
+        f"data.columns.{name}: values reach {worst:.6g} {unit} once converted from "
+        f"{spec.unit!r}{scale}, implausible for a {dimension} (expected within "
+        f"[{lo:g}, {hi:g}] {unit})",
+        hint=f"check the unit and scale of data.columns.{name} (file column {spec.source!r})",
+        source=source,
+    )
+
+
 def _convert(raw: pd.DataFrame, data: DataSection) -> pd.DataFrame:
     """Rename source columns to glossary names and convert to internal units."""
     out = {}
@@ -200,13 +233,45 @@ def _convert(raw: pd.DataFrame, data: DataSection) -> pd.DataFrame:
             out[name] = to_internal(values, spec.unit, dimension=dimension) * spec.sign
         except DataError as exc:  # pragma: no cover - the config checks units first
             raise DataError(exc.message, hint=exc.hint, source=f"data.columns.{name}") from None
+        _check_plausible(name, spec, out[name], str(data.file))
     return pd.DataFrame(out, index=raw.index)
+
+
+def _check_outputs(outputs: Mapping[str, np.ndarray], data: DataSection, source: str) -> None:
+    """A measured output with no value, or the same value throughout, is an error."""
+    for name, values in outputs.items():
+        key = f"data.columns.{name}"
+        finite = values[np.isfinite(values)]
+        if not finite.size:
+            raise DataError(
+                f"measured output {name} ({key}, file column {data.columns[name].source!r}) "
+                "has no measured value on the study clock",
+                hint="check the column, and data.start / data.end",
+                source=source,
+            )
+        if np.ptp(finite) <= 1e-9 * np.max(np.abs(finite)):
+            quantity = glossary_quantity(name)
+            unit = quantity.unit if quantity is not None else ""
+            raise DataError(
+                f"measured output {name} ({key}) is constant ({finite[0]:g} {unit}) over the "
+                "whole record: there is nothing to calibrate on",
+                hint=f"a stuck sensor or the wrong column? check {key}.source",
+                source=source,
+            )
 
 
 def _samples(value: timedelta | int, step: pd.Timedelta) -> int:
     if isinstance(value, int):
         return value
     return int(pd.Timedelta(value) // step)
+
+
+def _span(samples: int, step: pd.Timedelta) -> str:
+    """``samples * step`` as a short duration, even beyond pandas' range (292 years)."""
+    try:
+        return format_duration(samples * step)
+    except (OverflowError, ValueError):  # pandas' OutOfBoundsTimedelta is a ValueError
+        return f"{samples * step.total_seconds() / 86400 / 365.25:.3g} years"
 
 
 def layout_for(
@@ -240,7 +305,7 @@ def layout_for(
     if n_samples < need:
         raise DataError(
             f"the record is {format_duration(n_samples * step)} ({n_samples} samples) long; it "
-            f"must be at least {format_duration(need * step)} ({need} samples): warm-up "
+            f"must be at least {_span(need, step)} ({need} samples): warm-up "
             f"{warmup} + one period {length} + the whole periods covering the test window "
             f"{cover} samples",
             hint="use a longer record, or shorten [periods] warmup, length or the test window",
@@ -298,7 +363,11 @@ def load_measured(study: Study) -> MeasuredData:
     )
     frame, gaps = fill_gaps(frame, pd.Timedelta(data.max_gap_interpolate))
     outputs = {name: frame[name].to_numpy(dtype=float) for name in study.outputs.calibrate}
-    layout = layout_for(len(frame), step, study.periods, _missing(outputs, len(frame)))
+    _check_outputs(outputs, data, source)
+    try:
+        layout = layout_for(len(frame), step, study.periods, _missing(outputs, len(frame)))
+    except DataError as exc:  # name the file the record comes from
+        raise DataError(exc.message, hint=exc.hint, source=exc.source or source) from None
     forcing_names = study.boundary_conditions
     _check_forcing(frame, forcing_names, gaps, source)
     index = pd.DatetimeIndex(frame.index).tz_convert("UTC").tz_localize(None)

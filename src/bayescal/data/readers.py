@@ -85,10 +85,33 @@ def _to_float(
 def _numeric_frame(
     columns: dict[str, np.ndarray], index: pd.DatetimeIndex, lines: np.ndarray, source: str
 ) -> pd.DataFrame:
-    frame = pd.DataFrame(columns, index=pd.DatetimeIndex(index).as_unit("ns"))
+    for name, values in columns.items():
+        infinite = np.flatnonzero(np.isinf(values))
+        if infinite.size:
+            raise DataError(
+                f"line {lines[infinite[0]]}, column {name!r}: {values[infinite[0]]} is not a "
+                "finite number",
+                hint="blank the cell to mark a missing value",
+                source=source,
+            )
+    frame = pd.DataFrame(columns, index=_ns_index(pd.DatetimeIndex(index), lines, source))
     frame.index.name = "time"
     check_index(pd.DatetimeIndex(frame.index), source, lines)
     return frame
+
+
+def _ns_index(index: pd.DatetimeIndex, lines: np.ndarray, source: str) -> pd.DatetimeIndex:
+    """The index in nanoseconds; a time beyond their range (years 1678-2261) is an error."""
+    try:
+        return index.as_unit("ns")
+    except (OverflowError, ValueError):  # pandas' OutOfBoundsDatetime is a ValueError
+        bad = np.flatnonzero((index.year < 1678) | (index.year > 2261))
+        pos = int(bad[0]) if bad.size else 0
+        raise DataError(
+            f"line {lines[pos]}: time {index[pos]} is outside the years 1678 to 2261",
+            hint="check the time column (and data.time_format)",
+            source=source,
+        ) from None
 
 
 def _select(available: Sequence[object], wanted: Sequence[object] | None, source: str) -> list:
@@ -153,6 +176,22 @@ def _split_rows(
     return header, rows, lines
 
 
+_UTC_OFFSET = re.compile(r"(?:Z|[+-]\d{2}:?\d{2})$")
+
+
+def _check_offsets(texts: pd.Series, lines: np.ndarray, source: str) -> None:
+    """Timestamps with a UTC offset mixed with naive ones (local times) are ambiguous."""
+    marked = texts.str.contains(_UTC_OFFSET).to_numpy(dtype=bool)
+    if marked.any() and not marked.all():
+        aware, naive = int(np.argmax(marked)), int(np.argmax(~marked))
+        raise DataError(
+            f"line {lines[aware]} has a time with a UTC offset ({texts.iloc[aware]!r}), line "
+            f"{lines[naive]} one without ({texts.iloc[naive]!r}); mixing them is ambiguous",
+            hint="write every time with its offset, or none (local times of data.time_zone)",
+            source=source,
+        )
+
+
 def _parse_times(
     cells: np.ndarray, lines: np.ndarray, time_format: str | None, source: str
 ) -> pd.DatetimeIndex:
@@ -161,6 +200,7 @@ def _parse_times(
     try:
         times = pd.to_datetime(texts, format=fmt, errors="coerce")
     except (ValueError, TypeError) as exc:  # mixed offsets, bad format string
+        _check_offsets(texts, lines, source)
         try:
             times = pd.to_datetime(texts, format=fmt, errors="coerce", utc=True)
         except (ValueError, TypeError):
@@ -278,8 +318,8 @@ def read_parquet(
     """
     path = Path(path)
     source = str(path)
-    if not path.is_file():
-        _read_text(path)  # raises the not-found error
+    if not path.is_file() or not path.stat().st_size:
+        _read_text(path)  # raises the not-found or empty-file error
     try:
         frame = pd.read_parquet(path)
     except Exception as exc:  # pyarrow raises many types for corrupt files
