@@ -162,3 +162,30 @@ def test_load_results_matches_the_run(first: tuple[Path, Results]) -> None:
     np.testing.assert_allclose(
         loaded.predictions.metrics["mse"].to_numpy(), res.predictions.metrics["mse"].to_numpy()
     )
+
+
+@pytest.mark.slow
+def test_discrepancy_and_report_through_the_pipeline(tmp_path: Path) -> None:
+    folder = _study(tmp_path)
+    path = folder / "study.toml"
+    text = path.read_text(encoding="utf-8")
+    path.write_text(
+        text + "\n[discrepancy]\nenabled = true\nrealisations = 20\nupdate_interval = 50\n",
+        "utf-8",
+    )
+    res = run(load_study(folder), options=SERIAL)
+    assert res.discrepancy is not None
+    assert res.predictions is not None
+    ds = res.predictions.dataset
+    for name in ("delta", "corrected", "corrected_lower", "corrected_upper"):
+        assert f"heat_flux_in_{name}" in ds
+    corrected = ds["heat_flux_in_corrected"].values
+    # Corrected = the emulator's calibrated prediction + Delta: finite where predicted.
+    windows = ds["window"].values
+    assert np.all(np.isfinite(corrected[(windows == "train") | (windows == "test")]))
+    models = set(res.predictions.metrics["model"])
+    assert models == {"nominal", "calibrated", "calibrated+delta"}
+    assert res.report is not None
+    html = res.report.read_text(encoding="utf-8")
+    assert "Discrepancy" in html
+    assert (folder / "out" / "discrepancy.nc").is_file()

@@ -15,7 +15,10 @@ With ``[predict] method = "simulator"`` the simulator itself is re-run at
 ``runs`` posterior draws instead (:func:`simulator_band`): the prediction is
 the mean of those runs and the band adds the same observation noise (and
 Delta). This avoids the emulator's extrapolation where the test periods' conditions
-``x`` lie outside those of the training periods.
+``x`` lie outside those of the training periods. The corrected prediction
+(model + Delta) always uses the emulator: Delta is estimated as the
+observation minus the emulator's prediction of the model, so it also absorbs
+the emulator's own error and must be added to that prediction.
 
 Samples of the training periods get the training predictions; samples of the
 test window get the predictions of the periods covering it. Everything else

@@ -379,7 +379,9 @@ def _band(
 ) -> Band:
     section = ctx.study.predict
     seed = ctx.seed("predict")
-    if section.method == "simulator":
+    # Delta is estimated against the emulator's prediction of the model (eq. 18 as
+    # sampled), so the corrected prediction always goes through the emulator.
+    if section.method == "simulator" and discrepancy is None:
         runs, lam_star = posterior_runs(ctx, posterior, section.runs)
         return simulator_band(
             em.assembled,
