@@ -196,3 +196,19 @@ class SlowToLoad(Analytic):
     def __setstate__(self, state: dict[str, float]) -> None:
         time.sleep(state["load_delay"])
         self.__dict__.update(state)
+
+
+@dataclass(frozen=True)
+class Faulty(Analytic):
+    """Fails for ``b`` below ``fail`` and hangs for ``b`` in [``fail``, ``hang``)."""
+
+    fail: float = 0.10
+    hang: float = 0.12
+
+    def simulate(self, parameters: Mapping[str, float], forcing: Forcing) -> dict[str, np.ndarray]:
+        b = parameters["b"]
+        if b < self.fail:
+            raise SimulatorError(f"diverged at b={b:.4f}")
+        if b < self.hang:
+            time.sleep(3600)
+        return super().simulate(parameters, forcing)

@@ -444,3 +444,30 @@ def test_multilayer_wall_through_the_runner(tmp_path: Path) -> None:
     # A wall built again from the same description has the same fingerprint: cache hits.
     again = run_design(make_wall(), forcing, design, cache_dir=tmp_path, backend="processes")
     assert (again.n_run, again.n_cached) == (0, 6)
+
+
+@pytest.mark.slow
+def test_load_1000_runs_with_failures_and_hangs(tmp_path: Path) -> None:
+    from bayescal.report.html import _failures
+
+    priors = {"a": UniformPrior(0.0, 1.0), "b": UniformPrior(0.0, 1.0)}
+    design = latin_hypercube(priors, 1000, seed=4)
+    b = design.values[:, 1]
+    expect_fail, expect_hang = np.flatnonzero(b < 0.10), np.flatnonzero((b >= 0.10) & (b < 0.12))
+    # A Latin hypercube puts exactly 10 % and 2 % of 1000 rows in those strata of b.
+    assert (expect_fail.size, expect_hang.size) == (100, 20)
+    forcing = Forcing(3600.0, {"temp_air_out": np.linspace(0.0, 10.0, 48)})
+    res = run_design(
+        sims.Faulty(), forcing, design, cache_dir=tmp_path, backend="processes", jobs=2, timeout=2.0
+    )
+    failed = {f.index: f for f in res.failures}
+    assert set(failed) == set(expect_fail) | set(expect_hang)
+    assert {failed[i].error_type for i in expect_hang} == {"timeout"}
+    assert all("diverged" in failed[i].message for i in expect_fail)
+    assert res.indices.size == 880
+    np.testing.assert_allclose(
+        res.outputs["y"][0], sims.reference(*design.values[res.indices[0]], forcing)["y"]
+    )
+    html = _failures(res.failures)
+    for i in failed:  # every failure is listed in the report's table
+        assert f"<td>{i}</td>" in html
