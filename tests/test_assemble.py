@@ -116,3 +116,23 @@ def test_missing_measurement_in_a_training_period_is_refused(small: VirtualExper
     measured["heat_flux_in"][small.layout.train_starts[2] + 4] = np.nan
     with pytest.raises(DataError, match="missing values inside the training periods"):
         assemble(small.design, small.runs, measured, small.boundary, small.layout)
+
+
+def test_history_adds_the_previous_periods_conditions(small: VirtualExperiment) -> None:
+    ve = small
+    base = assemble(ve.design, ve.runs, ve.measured, ve.boundary, ve.layout, components=2)
+    lagged = assemble(
+        ve.design, ve.runs, ve.measured, ve.boundary, ve.layout, components=2, history=1
+    )
+    names = [sp.name for sp in lagged.inputs.series]
+    assert names == [*ve.boundary, *(f"{n}_lag1" for n in ve.boundary)]
+    assert lagged.x.shape[1] > base.x.shape[1]
+    assert lagged.x_test.shape[1] == lagged.x.shape[1]
+    # The lag series' PCA is centred on the mean day *before* each training period.
+    layout = ve.layout
+    out = ve.boundary["temp_surf_out"]
+    before = np.stack([out[s - PER_DAY : s] for s in layout.train_starts], axis=1)
+    lag = next(sp for sp in lagged.inputs.series if sp.name == "temp_surf_out_lag1")
+    np.testing.assert_allclose(lag.mean, before.mean(axis=1), rtol=1e-12)
+    # The basis and the weights do not depend on x.
+    np.testing.assert_array_equal(lagged.w, base.w)

@@ -226,6 +226,21 @@ def _check_measured(y_star: FloatArray, names: Sequence[str]) -> None:
         )
 
 
+def _with_history(
+    series: dict[str, FloatArray], history: int, period: int
+) -> dict[str, FloatArray]:
+    """Add each series delayed by 1..``history`` periods (``<name>_lag<k>``)."""
+    if history < 0:
+        raise ConfigError(f"history must be >= 0 periods, got {history}")
+    out = dict(series)
+    for k in range(1, history + 1):
+        shift = k * period
+        for name, values in series.items():
+            head = np.full(min(shift, values.size), values[0])
+            out[f"{name}_lag{k}"] = np.concatenate([head, values[: values.size - shift]])
+    return out
+
+
 def assemble(
     design: Design,
     runs: Mapping[str, ArrayLike],
@@ -237,6 +252,7 @@ def assemble(
     variance: float = 0.90,
     components: int | None = None,
     input_variance: float = 0.90,
+    history: int = 0,
     lam_shape: float = 5.0,
     lam_rate: float = 5.0,
 ) -> Assembled:
@@ -266,6 +282,12 @@ def assemble(
         Exact number ``p`` of basis vectors.
     input_variance
         Fraction of each boundary-condition series' variance kept by its PCA. [-]
+    history
+        Number of preceding periods whose boundary conditions also enter ``x``
+        (as series ``<name>_lag<k>``): a slow wall or room answers to the
+        weather of the days before, which the current period alone does not
+        show. 0 is the paper's ``x``. Samples before the record start repeat
+        the first value.
     lam_shape, lam_rate
         Gamma prior of the precisions before the update of eq. 7. [-]
 
@@ -288,7 +310,11 @@ def assemble(
     y_star_std = stack.apply({n: layout.cut(v) for n, v in meas.items()})
     _check_measured(y_star_std, names)
     y_test_std = stack.apply({n: layout.cut(v, "test") for n, v in meas.items()})
-    bc = {n: _series(boundary, n, n_total, "boundary condition") for n in boundary}
+    bc = _with_history(
+        {n: _series(boundary, n, n_total, "boundary condition") for n in boundary},
+        history,
+        layout.period,
+    )
     inputs = input_pca({n: layout.cut(v).T for n, v in bc.items()}, input_variance)
     x_test = (
         inputs.transform({n: layout.cut(v, "test").T for n, v in bc.items()})

@@ -234,6 +234,7 @@ def assemble_runs(ctx: Context, sims: RunResults) -> Assembled:
         variance=section.pca_variance,
         components=section.pca_components,
         input_variance=section.input_pca_variance,
+        history=section.history_periods,
     )
 
 
