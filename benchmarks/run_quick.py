@@ -5,7 +5,9 @@ Runs, each in its own process so thread settings and imports stay clean:
 * ``bench_simulators.py``: built-in wall and test box, time per run and ratio to targets;
 * ``bench_algebra.py --skip-large-dense``: calibration log-density, dense vs Kronecker
   at the paper's size, Kronecker alone at R = 200 x m* = 100;
-* ``bench_runner.py``: runs per second, serial vs 2 workers (processes, Dask).
+* ``bench_runner.py``: runs per second, serial vs 2 workers (processes, Dask);
+* ``bench_floor.py --quick``: log-density time against its unavoidable operations;
+* ``bench_scale.py --quick``: the scale benchmark at a CI size.
 
 BLAS is single-threaded (``OPENBLAS_NUM_THREADS=1``, ``OMP_NUM_THREADS=1``).
 Full-size variants are run by calling the scripts directly (see docs/benchmarks.md).
@@ -23,6 +25,8 @@ QUICK = [
     ["bench_simulators.py"],
     ["bench_algebra.py", "--skip-large-dense"],
     ["bench_runner.py", "--scale", "0.5"],
+    ["bench_floor.py", "--quick"],
+    ["bench_scale.py", "--quick"],
 ]
 
 

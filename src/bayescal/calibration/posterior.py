@@ -35,7 +35,7 @@ from bayescal.calibration.chains import run_chains
 from bayescal.calibration.diagnostics import Diagnostics, _arviz, diagnose
 from bayescal.calibration.samplers.mwg import MetropolisWithinGibbs
 from bayescal.calibration.samplers.rwm import AdaptiveMetropolis
-from bayescal.design import Prior
+from bayescal.design import Prior, UniformPrior
 from bayescal.emulator.assemble import Assembled
 from bayescal.emulator.gp import Emulator
 from bayescal.emulator.kernel import FloatArray
@@ -96,7 +96,10 @@ class CalibrationPosterior:
         for k, prior in enumerate(self.priors):
             if total == -math.inf:
                 break
-            total += float(prior.logpdf_unit(arr[k]))
+            if type(prior) is UniformPrior:  # the common case, without numpy's overhead
+                total += 0.0 if 0.0 <= float(arr[k]) <= 1.0 else -math.inf
+            else:
+                total += float(prior.logpdf_unit(arr[k]))
         return total
 
     def __call__(self, v: ArrayLike) -> float:

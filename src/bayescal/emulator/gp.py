@@ -19,11 +19,13 @@ sampled vector is ``[beta_1j .. beta_rj, tau_j]`` for ``j = 1..p``, then
 Metropolis-within-Gibbs one coordinate moves at a time, so only that basis's
 term changes (all of them for ``lambda``, but then only the nugget moves):
 the object keeps, per basis, the eigen-decompositions of the correlation
-factors ``R_theta`` and ``R_x`` and the rotated weights for the last few
-values of the correlation parameters, and the terms of the other bases. A
-move of a ``theta`` (``x``) correlation parameter costs one ``R x R``
-(``m* x m*``) eigen-decomposition and a rotation; a move of ``tau`` or
-``lambda`` costs ``O(R m*)`` per basis.
+factors ``R_theta`` and ``R_x``, the half-rotated weights ``Q_t^T W`` and the
+rotated weights for the last few values of the correlation parameters, and
+the terms of the other bases. A move of a ``theta`` correlation parameter
+costs one ``R x R`` eigen-decomposition and the rotation ``(Q_t^T W) Q_x``
+(``O(R^2 m* + R m*^2)``), one of an ``x`` parameter one ``m* x m*``
+eigen-decomposition and ``O(R m*^2)``; a move of ``tau`` or ``lambda`` costs
+``O(R m*)`` per basis.
 
 Training, MAP
 -------------
@@ -249,12 +251,13 @@ class TrainingPosterior:
     def _reset_caches(self) -> None:
         self._eig_t = [_Lru() for _ in range(self.p)]
         self._eig_x = [_Lru() for _ in range(self.p)]
+        self._half = [_Lru() for _ in range(self.p)]  # Q_t^T W, keyed on beta_theta
         self._rot = [_Lru() for _ in range(self.p)]
         self._terms = [_Lru() for _ in range(self.p)]
 
     def __getstate__(self) -> dict[str, Any]:
         state = self.__dict__.copy()
-        for key in ("_eig_t", "_eig_x", "_rot", "_terms"):
+        for key in ("_eig_t", "_eig_x", "_half", "_rot", "_terms"):
             state.pop(key)
         return state
 
@@ -280,7 +283,10 @@ class TrainingPosterior:
         eig_x = self._eig_x[j].get(kx, lambda: self._eig(self.d_x, bx))
 
         def rotate() -> FloatArray:
-            rot = eig_t.vectors.T @ self.w_grid[j] @ eig_x.vectors
+            # (Q_t^T W) Q_x with the left half kept: a move of an x parameter
+            # costs one R m*^2 product instead of R^2 m* + R m*^2.
+            half = self._half[j].get(kt, lambda: eig_t.vectors.T @ self.w_grid[j])
+            rot = half @ eig_x.vectors
             return rot * rot
 
         rot_sq = self._rot[j].get(kt + kx, rotate)
