@@ -702,7 +702,7 @@ def _map(
 def train(
     assembled: Assembled,
     *,
-    n_burn: int = 1000,
+    n_burn: int = 500,
     n_draws: int = 1000,
     n_chains: int = 2,
     seed: int = 0,
