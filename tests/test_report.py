@@ -240,7 +240,7 @@ def test_loo_predictions_reproduce_the_emulators_residuals(parts: Parts) -> None
     runs = parts.ve.runs["heat_flux_in"]
     assert sim.shape == mean.shape == sd.shape == loo.z.shape
     assert np.all((sim >= runs.min() - 1e-9) & (sim <= runs.max() + 1e-9))
-    # Same conditioning as Emulator.loo_cv, rebuilt by another route: equal to rounding.
+    # The figures' unstandardised predictions give back the emulator's residuals.
     np.testing.assert_allclose((sim - mean) / sd, loo.z, rtol=1e-7, atol=1e-7)
 
 

@@ -360,6 +360,28 @@ class _Conditional:
         reduction = np.sum(((a_t * a_t) @ self.inv_den) * (a_x * a_x), axis=1)
         return mean, np.maximum(self.kernel.variance - reduction, 0.0)
 
+    def leave_one_run_out(self, v: FloatArray, a: float) -> tuple[FloatArray, FloatArray]:
+        """Latent mean and variance ``(R, m*)`` of each run predicted from the others.
+
+        Closed form of dropping run ``b`` (all its periods) and conditioning on
+        the rest: with ``A = S_theta ⊗ S_x + a I`` and ``P = A^-1``, the
+        predictive covariance of ``v_b`` is ``(P_bb)^-1`` and its mean
+        ``v_b - (P_bb)^-1 (A^-1 v)_b``. Since ``P_bb = Q_x diag(g_b) Q_x^T`` with
+        ``g_b,i = sum_k Q_theta[b, k]^2 / (l_k l_i + a)``, every run costs
+        ``O(m*^2)`` instead of a new ``O(R^3 + m*^3)`` factorisation.
+
+        Parameters
+        ----------
+        v
+            The training weights of this basis on the grid ``(R, m*)``. [-]
+        a
+            The nugget the covariance was built with. [-]
+        """
+        g = (self.q_t * self.q_t) @ self.inv_den  # (R, m*)
+        mean = v - ((self.h @ self.q_x) / g) @ self.q_x.T
+        var = (1.0 / g) @ (self.q_x * self.q_x).T - a
+        return mean, np.maximum(var, 0.0)
+
 
 @dataclass(frozen=True)
 class ConditionalPieces:
@@ -615,27 +637,41 @@ class Emulator:
         sd = self.outputs.sd[:, None]
         return self.outputs.invert(mean), var * sd * sd
 
+    def loo_predict(self) -> tuple[FloatArray, FloatArray]:
+        """Leave-one-run-out predictions, standardised, hyperparameters at the MAP.
+
+        Each run is predicted from the other ``R - 1`` in closed form
+        (:meth:`_Conditional.leave_one_run_out`); equal to refitting without the
+        run to rounding (``tests/test_gp.py``).
+
+        Returns
+        -------
+        mean, variance
+            ``(R, N, m*)`` each on the standardised scale; the variance includes
+            the out-of-basis noise ``1 / lambda``.
+        """
+        n_runs, n_per = self.theta.shape[0], self.x.shape[0]
+        grid = self.w.T.reshape(self.basis.p, n_runs, n_per)
+        parts = [
+            cond.leave_one_run_out(grid[j], float(a))
+            for j, (cond, a) in enumerate(zip(self._cond, self.nuggets, strict=True))
+        ]
+        mean_w = np.stack([m for m, _ in parts])  # (p, R, m*)
+        var_w = np.stack([v for _, v in parts])
+        k = self.basis.k
+        mean = np.einsum("np,prm->rnm", k, mean_w)
+        var = np.einsum("np,prm->rnm", k * k, var_w) + 1.0 / self.lam
+        return mean, var
+
     def loo_cv(self) -> LooResult:
         """Leave-one-run-out cross-validation (hyperparameters fixed at the MAP)."""
         n_runs, n_per = self.theta.shape[0], self.x.shape[0]
-        grid = self.w.T.reshape(self.basis.p, n_runs, n_per)
-        nug, k, sd = self.nuggets, self.basis.k, self.outputs.sd[:, None]
-        z = np.empty((n_runs, k.shape[0], n_per))
-        sq = np.empty((n_runs, k.shape[0]))
-        for run in range(n_runs):
-            keep = np.arange(n_runs) != run
-            th_new = np.broadcast_to(self.theta[run], (n_per, self.theta.shape[1]))
-            parts = [
-                _Conditional.build(
-                    kern, self.theta[keep], self.x, grid[j][keep], float(nug[j])
-                ).predict(th_new, self.x)
-                for j, kern in enumerate(self.kernels)
-            ]
-            mean = k @ np.array([m for m, _ in parts])
-            var = (k * k) @ np.array([v for _, v in parts]) + 1.0 / self.lam
-            resid = self.y_std[:, run * n_per : (run + 1) * n_per] - mean
-            z[run] = resid / np.sqrt(var)
-            sq[run] = np.mean((resid * sd) ** 2, axis=1)
+        sd = self.outputs.sd[:, None]
+        mean, var = self.loo_predict()
+        sim = self.y_std.reshape(-1, n_runs, n_per).transpose(1, 0, 2)
+        resid = sim - mean
+        z = resid / np.sqrt(var)
+        sq = np.mean((resid * sd) ** 2, axis=2)
         slices = self.outputs.slices
         phys = self.outputs.invert(self.y_std)
         return LooResult(

@@ -18,7 +18,6 @@ standard deviations (``LooResult`` keeps only the standardised residuals).
 
 from __future__ import annotations
 
-import dataclasses
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -346,9 +345,9 @@ def plot_pca_variance(path: str | Path, explained: ArrayLike, p: int) -> Path:
 def loo_predictions(emulator: Emulator) -> dict[str, tuple[FloatArray, FloatArray, FloatArray]]:
     """Leave-one-run-out predictions of the emulator in the outputs' units.
 
-    Each run is dropped in turn and predicted from the others at the MAP
-    hyperparameters (as :meth:`bayescal.emulator.gp.Emulator.loo_cv`, which
-    keeps only the standardised residuals).
+    Each run is predicted from the others at the MAP hyperparameters, in closed
+    form (:meth:`bayescal.emulator.gp.Emulator.loo_predict`, which
+    :meth:`~bayescal.emulator.gp.Emulator.loo_cv` summarises).
 
     Parameters
     ----------
@@ -363,22 +362,12 @@ def loo_predictions(emulator: Emulator) -> dict[str, tuple[FloatArray, FloatArra
         predictive standard deviation (including ``1 / lambda``).
     """
     n_runs, n_per = emulator.theta.shape[0], emulator.x.shape[0]
-    n_rows = emulator.y_std.shape[0]
-    sim, mean, sd = (np.empty((n_runs, n_rows, n_per)) for _ in range(3))
-    scale = emulator.outputs.sd[:, None]
-    for run in range(n_runs):
-        keep = np.repeat(np.arange(n_runs) != run, n_per)
-        reduced = dataclasses.replace(
-            emulator,
-            theta=emulator.theta[np.arange(n_runs) != run],
-            w=emulator.w[keep],
-            y_std=emulator.y_std[:, keep],
-            conditional=None,
-        )
-        m, v = reduced.predict_std(emulator.theta[run], emulator.x)
-        sim[run] = emulator.outputs.invert(emulator.y_std[:, ~keep])
-        mean[run] = emulator.outputs.invert(m)
-        sd[run] = np.sqrt(v) * scale
+    scale = emulator.outputs.sd[None, :, None]
+    centre = emulator.outputs.mean[None, :, None]
+    m, v = emulator.loo_predict()
+    sim = emulator.y_std.reshape(-1, n_runs, n_per).transpose(1, 0, 2) * scale + centre
+    mean = m * scale + centre
+    sd = np.sqrt(v) * scale
     return {
         name: (sim[:, sl], mean[:, sl], sd[:, sl]) for name, sl in emulator.outputs.slices.items()
     }
