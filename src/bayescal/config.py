@@ -54,10 +54,13 @@ from bayescal.config_simulators import (
     _normal_unit,
     _resolve,
     _Section,
+    parse_sensor_target,
 )
 from bayescal.data.align import format_duration, parse_duration, parse_time_zone
 from bayescal.data.measured import column_problems
 from bayescal.errors import ConfigError
+from bayescal.glossary import GLOSSARY
+from bayescal.units import same_scale
 
 __all__ = [  # the [simulator] sections are re-exported from bayescal.config_simulators
     "FORMATS",
@@ -362,8 +365,9 @@ class Parameter(_Section):
     targets: list[str] = _f(
         "What the value sets: 'layer.property' or r_si, r_se, solar_absorptance (wall); a "
         "constant name (box); 'ObjectType:ObjectName:Field' (energyplus; a name holding ':' "
-        "in double quotes); a template placeholder (command); an FMU variable (fmu). Several "
-        "targets share one value.",
+        "in double quotes); a template placeholder (command); an FMU variable (fmu); "
+        "'measured.<output>.offset' or '.gain' (any simulator: a sensor model, reading = "
+        "gain * simulated + offset). Several targets share one value.",
         ["concrete.conductivity"],
         ["board_out.specific_heat", "board_in.specific_heat"],
         ["Material:AeratedConcrete:Conductivity"],
@@ -646,10 +650,21 @@ def _target_problems(study: Study) -> list[str]:
     for name, parameter in study.parameters.items():
         key = f"parameters.{name}"
         kinds: set[str] = set()
-        for target in parameter.targets:
+        sensors = [_sensor_target(t) for t in parameter.targets]
+        if any(s is not None for s in sensors) and any(s is None for s in sensors):
+            problems.append(
+                f"{key}.targets: mixes a sensor target ('measured.…') with simulator "
+                "targets; give the sensor its own parameter"
+            )
+            continue
+        for target, sensor in zip(parameter.targets, sensors, strict=True):
             try:
-                kind = simulator.target_kind(target)
-                canonical = simulator.target_key(target)
+                if sensor is not None:
+                    problems += _sensor_problems(study, key, parameter.unit, sensor)
+                    kind, canonical = None, target
+                else:
+                    kind = simulator.target_kind(target)
+                    canonical = simulator.target_key(target)
             except ValueError as exc:
                 problems.append(f"{key}.targets: {exc}")
                 continue
@@ -666,6 +681,35 @@ def _target_problems(study: Study) -> list[str]:
                 f"({found[0].replace('_', ' ')}); write values in {_KIND_UNITS[found[0]][1]!r}"
             )
     return problems
+
+
+def _sensor_target(target: str) -> tuple[str, str] | None:
+    try:
+        return parse_sensor_target(target)
+    except ValueError:
+        return ("", target)  # malformed: _sensor_problems reports it
+
+
+def _sensor_problems(study: Study, key: str, unit: str, sensor: tuple[str, str]) -> list[str]:
+    """Problems of one ``measured.<output>.<offset|gain>`` target."""
+    output, prop = sensor
+    if not output:
+        parse_sensor_target(prop)  # raises its ValueError for the malformed target
+    if output not in study.outputs.calibrate:
+        raise ValueError(
+            f"'measured.{output}.{prop}': {output!r} is not calibrated on; outputs.calibrate "
+            f"lists {', '.join(study.outputs.calibrate)}"
+        )
+    if prop == "gain":
+        if _normal_unit(unit) not in _KIND_UNITS["dimensionless"][0]:
+            return [f'{key}.unit: a gain is dimensionless; write unit = "1", got {unit!r}']
+        return []
+    quantity = GLOSSARY.get(output)
+    if quantity is not None and not same_scale(unit, quantity.dimension):
+        return [
+            f"{key}.unit: the offset of {output!r} takes its unit ({quantity.unit}), got {unit!r}"
+        ]
+    return []
 
 
 def _output_problems(study: Study) -> list[str]:

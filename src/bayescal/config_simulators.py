@@ -42,6 +42,13 @@ Calibration targets, written in ``[parameters.<name>].targets``
 
 The base model and the field helpers shared with :mod:`bayescal.config` live
 here because ``config`` imports this module (not the other way round).
+Any simulator
+    ``"measured.<output>.offset"`` and ``"measured.<output>.gain"``: a sensor
+    model on an output, ``reading = gain * simulated + offset`` (a heat-flux
+    plate's zero offset, a pyranometer's calibration factor), calibrated
+    with the physics; see :func:`parse_sensor_target`. The offset takes the
+    output's unit (any spelling with the same scale: ``K`` or ``°C`` for a
+    temperature), the gain ``1``.
 """
 
 from __future__ import annotations
@@ -123,6 +130,35 @@ _KIND_UNITS = {
     "dimensionless": ({"1", "-", "fraction"}, "1"),
 }
 """Kind of a calibration target -> (accepted unit spellings, normalised; the SI unit)."""
+
+
+SENSOR_PREFIX = "measured."
+SENSOR_PROPERTIES = ("offset", "gain")
+
+
+def parse_sensor_target(target: str) -> tuple[str, str] | None:
+    """Split a sensor-model target ``"measured.<output>.<offset|gain>"``.
+
+    Returns
+    -------
+    tuple or None
+        ``(output, property)``, or None when ``target`` is not a sensor target
+        (it then belongs to the simulator).
+
+    Raises
+    ------
+    ValueError
+        If the target starts with ``measured.`` but is not of that form.
+    """
+    if not target.startswith(SENSOR_PREFIX):
+        return None
+    output, _, prop = target[len(SENSOR_PREFIX) :].rpartition(".")
+    if not output or prop not in SENSOR_PROPERTIES:
+        raise ValueError(
+            f"{target!r} is not a sensor target; write 'measured.<output>.offset' or "
+            "'measured.<output>.gain', e.g. 'measured.heat_flux_in.offset'"
+        )
+    return output, prop
 
 
 def _normal_unit(unit: str) -> str:

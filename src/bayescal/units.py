@@ -83,6 +83,16 @@ def dimension_of(unit: str) -> str:
         ) from None
 
 
+def same_scale(unit: str, dimension: str) -> bool:
+    """Whether ``unit`` measures ``dimension`` on the internal unit's scale.
+
+    True for the internal unit and for spellings that differ from it by an
+    offset only (``K`` for temperature differences); False for unknown units.
+    """
+    known = _UNITS.get(unit)
+    return known is not None and known.dimension == dimension and known.scale == 1.0
+
+
 def to_internal(values: npt.ArrayLike, unit: str, *, dimension: str | None = None) -> np.ndarray:
     """Convert values in ``unit`` to the internal unit of its dimension.
 

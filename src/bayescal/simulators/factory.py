@@ -32,7 +32,11 @@ from bayescal.config import (
     Study,
     WallSimulator,
 )
-from bayescal.config_simulators import energyplus_field_key, parse_energyplus_target
+from bayescal.config_simulators import (
+    energyplus_field_key,
+    parse_energyplus_target,
+    parse_sensor_target,
+)
 from bayescal.errors import BayescalError, ConfigError, SimulatorError
 from bayescal.simulators.base import Forcing, Simulator, check_parameters
 from bayescal.simulators.fvm import Layer
@@ -75,6 +79,60 @@ class TargetedSimulator:
         check_parameters(parameters, self.parameter_names, type(self.inner).__name__)
         inner = {t: float(v) for name, v in parameters.items() for t in self.targets[name]}
         return self.inner.simulate(inner, forcing)
+
+
+@dataclass(frozen=True)
+class SensorModel:
+    """A simulator whose outputs pass through calibrated sensors.
+
+    ``reading = gain * simulated + offset`` per output, with gains and offsets
+    set by study parameters whose targets are ``"measured.<output>.gain"`` or
+    ``".offset"`` (the other parameters go to the inner simulator). A gain or
+    offset absent from the study is 1 or 0.
+
+    Parameters
+    ----------
+    inner
+        The simulator of the physics.
+    names
+        All study parameter names, in the study's order.
+    sensors
+        Study parameter name -> its ``(output, "gain" | "offset")`` targets.
+    """
+
+    inner: Simulator
+    names: tuple[str, ...]
+    sensors: Mapping[str, tuple[tuple[str, str], ...]]
+
+    @property
+    def parameter_names(self) -> tuple[str, ...]:
+        return self.names
+
+    @property
+    def input_names(self) -> tuple[str, ...]:
+        return self.inner.input_names
+
+    @property
+    def output_names(self) -> tuple[str, ...]:
+        return self.inner.output_names
+
+    def simulate(self, parameters: Mapping[str, float], forcing: Forcing) -> dict[str, np.ndarray]:
+        check_parameters(parameters, self.parameter_names, type(self.inner).__name__)
+        inner = {k: v for k, v in parameters.items() if k not in self.sensors}
+        out = dict(self.inner.simulate(inner, forcing))
+        gain: dict[str, float] = {}
+        offset: dict[str, float] = {}
+        for name, targets in self.sensors.items():
+            for output, prop in targets:
+                (gain if prop == "gain" else offset)[output] = float(parameters[name])
+        for output in {*gain, *offset}:
+            if output not in out:
+                raise SimulatorError(
+                    f"the simulator produced no {output!r} for its sensor model",
+                    hint=f"it produced {', '.join(out)}",
+                )
+            out[output] = gain.get(output, 1.0) * np.asarray(out[output]) + offset.get(output, 0.0)
+        return out
 
 
 def _targets(study: Study) -> dict[str, Sequence[str]]:
@@ -477,7 +535,26 @@ def build_simulator(study: Study) -> Simulator:
         ``parameters.k_cb.targets:``.
     SimulatorError
         If an EnergyPlus model or an FMU cannot be read for another reason.
+
+    Notes
+    -----
+    Parameters targeting ``"measured.<output>.gain"`` or ``".offset"`` wrap
+    the simulator in a :class:`SensorModel`.
     """
+    sensors = {
+        name: tuple(found for t in p.targets if (found := parse_sensor_target(t)) is not None)
+        for name, p in study.parameters.items()
+    }
+    sensors = {name: targets for name, targets in sensors.items() if targets}
+    if not sensors:
+        return _build_physics(study)
+    physics = {name: p for name, p in study.parameters.items() if name not in sensors}
+    inner = _build_physics(study.model_copy(update={"parameters": physics}))
+    return SensorModel(inner, tuple(study.parameters), sensors)
+
+
+def _build_physics(study: Study) -> Simulator:
+    """The simulator of the study's ``[simulator]`` section (no sensor model)."""
     section = study.simulator
     if isinstance(section, WallSimulator):
         return _wall(section, study)
