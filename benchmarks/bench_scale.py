@@ -10,11 +10,12 @@ hypercube runs over ``m*`` daily periods, and an output basis of exactly ``p``
 components (``assemble(..., components=p)``). Chains run in worker processes
 (``backend="processes"``, 2 at a time on 2 cores), BLAS single-threaded.
 
-Training runs fewer sweeps than the project's default (``[emulator]`` burn 1000
-+ samples 2000, 2 chains) unless asked: the script prints the measured time and
-a linear extrapolation to the default (the cost per sweep does not depend on
-the number of sweeps; the MAP refinement and the conditioning are counted once,
-as measured). Calibration runs the full 4 x (burn + 5000) sweeps by default.
+Training runs the project's default sweeps (``[emulator]`` burn and samples,
+read from ``bayescal.config``, 2 chains) unless ``--train-sweeps`` asks for
+fewer; the script then prints the measured time and a linear extrapolation to
+the default (the cost per sweep does not depend on the number of sweeps; the
+MAP refinement and the conditioning are counted once, as measured).
+Calibration runs the full 4 x (burn + 5000) sweeps by default.
 
 Peak memory: ``ru_maxrss`` of this process and the largest of its worker
 processes (``RUSAGE_CHILDREN``); with 2 workers alive at once the total is at
@@ -22,7 +23,7 @@ most this process + 2 x the largest worker, printed as the bound.
 
 Run::
 
-    .venv/bin/python benchmarks/bench_scale.py                 # the issue's size
+    /usr/bin/time -v .venv/bin/python benchmarks/bench_scale.py --loo   # the issue's size
     .venv/bin/python benchmarks/bench_scale.py --quick         # CI size (~1 minute)
     .venv/bin/python benchmarks/bench_scale.py --train-sweeps 100 100 --loo
 """
@@ -46,11 +47,14 @@ import numpy as np  # noqa: E402
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 
 from bayescal.calibration.posterior import calibrate  # noqa: E402
+from bayescal.config import EmulatorSection  # noqa: E402
 from bayescal.emulator.assemble import assemble  # noqa: E402
 from bayescal.emulator.gp import train  # noqa: E402
 from virtual_wall import virtual_experiment  # noqa: E402
 
-DEFAULT_TRAIN = (1000, 2000, 2)  # [emulator] burn, samples; 2 chains (pipeline)
+_EMULATOR_DEFAULTS = EmulatorSection()
+# [emulator] burn, samples; 2 chains (what the pipeline runs)
+DEFAULT_TRAIN = (_EMULATOR_DEFAULTS.burn, _EMULATOR_DEFAULTS.samples, 2)
 TARGET_SECONDS = 15 * 60.0
 TARGET_BYTES = 4 * 2**30
 
@@ -108,7 +112,11 @@ def main() -> None:
     parser.add_argument("--periods", type=int, default=200)
     parser.add_argument("--bases", type=int, default=5)
     parser.add_argument(
-        "--train-sweeps", type=int, nargs=2, default=(100, 100), metavar=("BURN", "DRAWS")
+        "--train-sweeps",
+        type=int,
+        nargs=2,
+        default=DEFAULT_TRAIN[:2],
+        metavar=("BURN", "DRAWS"),
     )
     parser.add_argument("--train-chains", type=int, default=2)
     parser.add_argument("--no-refine", action="store_true", help="skip the L-BFGS-B MAP step")

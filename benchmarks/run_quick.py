@@ -7,7 +7,10 @@ Runs, each in its own process so thread settings and imports stay clean:
   at the paper's size, Kronecker alone at R = 200 x m* = 100;
 * ``bench_runner.py``: runs per second, serial vs 2 workers (processes, Dask);
 * ``bench_floor.py --quick``: log-density time against its unavoidable operations;
-* ``bench_scale.py --quick``: the scale benchmark at a CI size.
+* ``bench_scale.py --quick``: the scale benchmark at a CI size;
+* ``bench_vectorised.py --quick``: lockstep (vectorised) chains against serial ones;
+* ``bench_hmc.py --quick``: NUTS against Metropolis-within-Gibbs, bulk ESS of theta*
+  per CPU second (skipped with a message where the ``hmc`` extra is missing).
 
 BLAS is single-threaded (``OPENBLAS_NUM_THREADS=1``, ``OMP_NUM_THREADS=1``).
 Full-size variants are run by calling the scripts directly (see docs/benchmarks.md).
@@ -27,6 +30,8 @@ QUICK = [
     ["bench_runner.py", "--scale", "0.5"],
     ["bench_floor.py", "--quick"],
     ["bench_scale.py", "--quick"],
+    ["bench_vectorised.py", "--quick"],
+    ["bench_hmc.py", "--quick"],
 ]
 
 

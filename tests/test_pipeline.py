@@ -180,7 +180,7 @@ def test_discrepancy_and_report_through_the_pipeline(tmp_path: Path) -> None:
     for name in ("delta", "corrected", "corrected_lower", "corrected_upper"):
         assert f"heat_flux_in_{name}" in ds
     corrected = ds["heat_flux_in_corrected"].values
-    # Corrected = the emulator's calibrated prediction + Delta: finite where predicted.
+    # Corrected = the simulator at draws of the Delta phase + Delta: finite where predicted.
     windows = ds["window"].values
     assert np.all(np.isfinite(corrected[(windows == "train") | (windows == "test")]))
     models = set(res.predictions.metrics["model"])

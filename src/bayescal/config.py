@@ -506,6 +506,18 @@ class CalibrationSection(_Section):
     burn: int = _f("Burn-in iterations per chain.", 2000, default=2000, ge=0)
     samples: int = _f("Iterations kept per chain.", 5000, default=5000, ge=1)
     seed: int | None = _f("Seed; derived from [study].seed if omitted.", 2, default=None, ge=0)
+    sampler: Literal["mwg", "nuts"] = _f(
+        "MCMC sampler: 'mwg' (Metropolis-within-Gibbs) or 'nuts' (No-U-Turn with JAX, in a "
+        'spawned process; needs `pip install "bayescal[hmc]"`; burn is its warm-up, 500 '
+        "burn + 1000 samples are plenty; no checkpoints). 'mwg' is the default: on the "
+        "virtual wall (30 runs x 25 days, benchmarks/bench_hmc.py) NUTS drew about 3.8x "
+        "the bulk ESS of theta* per CPU second while sampling, but its fixed cost (JIT "
+        "compilation 5-6.5 CPU s, process start-up 2 s) left a whole default-length "
+        "calibration no faster (min ESS per CPU second 386 vs 389, about 10 s each), and "
+        "'mwg' needs no extra package and resumes from checkpoints.",
+        "nuts",
+        default="mwg",
+    )
 
 
 class DiscrepancySection(_Section):
@@ -529,7 +541,9 @@ class PredictSection(_Section):
     method: Literal["emulator", "simulator"] = _f(
         "Calibrated predictions from the emulator at `draws` posterior draws, or from "
         "the simulator re-run at `runs` posterior draws (exact physics, honest on test "
-        "periods whose conditions the training periods did not span; costs `runs` runs).",
+        "periods whose conditions the training periods did not span; costs `runs` runs). "
+        "With a discrepancy, the corrected prediction adds Delta to the same kind of "
+        "prediction (for 'simulator': runs at draws of the Delta phase's theta*).",
         "simulator",
         default="emulator",
     )

@@ -1,4 +1,4 @@
-"""Several chains of one sampler, serially or in worker processes.
+"""Several chains of one sampler, serially, in worker processes, or vectorised.
 
 Chain ``k`` gets its own generator ``numpy.random.default_rng(child_k)`` with
 ``child_k = numpy.random.SeedSequence(seed).spawn(n_chains)[k]``, so the draws
@@ -6,6 +6,12 @@ depend on the seed only, not on whether the chains ran in parallel or in
 which order they finished. In processes (``concurrent.futures``), the
 log-density, the sampler and the starting points are pickled: use module-level
 functions or instances of module-level classes.
+
+Backend ``"vectorised"`` (Metropolis-within-Gibbs only) runs all chains in
+this process in lockstep, one batched log-density call per coordinate update
+(:mod:`bayescal.calibration.samplers.mwg_batch`); each chain consumes its
+generator as the serial sampler does, so its draws equal the serial ones
+(bit for bit when the batched log-density equals the scalar one row by row).
 """
 
 from __future__ import annotations
@@ -17,17 +23,22 @@ from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wai
 from dataclasses import dataclass
 from multiprocessing import Manager
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from bayescal.calibration.checkpoint import ChainCheckpoint
 from bayescal.calibration.samplers.base import Callback, LogDensity, Sampler, SamplerResult
+from bayescal.calibration.samplers.mwg import MetropolisWithinGibbs
+from bayescal.calibration.samplers.mwg_batch import as_lockstep, run_lockstep
 from bayescal.errors import ConfigError
 
 StartFunction = Callable[[np.random.Generator], ArrayLike]
 """Draws a starting point (d,) with the chain's own generator."""
+
+ChainBackend = Literal["processes", "serial", "vectorised"]
+BACKENDS: tuple[str, ...] = ("processes", "serial", "vectorised")
 
 
 @dataclass(frozen=True)
@@ -128,6 +139,7 @@ def run_chains(
     callback: Callback | None = None,
     checkpoint_dir: str | os.PathLike[str] | None = None,
     checkpoint_seconds: float = 30.0,
+    backend: ChainBackend | None = None,
 ) -> Chains:
     """Run ``n_chains`` chains of ``sampler`` and collect them.
 
@@ -150,7 +162,8 @@ def run_chains(
     names
         Parameter names; default ``x0, x1, ...``.
     parallel
-        Run the chains in worker processes (``ProcessPoolExecutor``).
+        Run the chains in worker processes (``ProcessPoolExecutor``); ignored
+        when ``backend`` is given.
     max_workers
         Worker processes; default ``min(n_chains, os.cpu_count())``.
     callback
@@ -164,21 +177,34 @@ def run_chains(
         sampler must accept ``checkpoint=`` (Metropolis-within-Gibbs does).
     checkpoint_seconds
         Minimum wall time between two snapshots of a chain. [s]
+    backend
+        ``"processes"``, ``"serial"`` or ``"vectorised"`` (all chains in lockstep
+        in this process, batched log-density calls; Metropolis-within-Gibbs
+        only, no checkpoints); the log-density's batched form is chosen by
+        :func:`~bayescal.calibration.samplers.mwg_batch.as_lockstep` (a
+        calibration posterior gets the batched Kronecker likelihood). Default: from ``parallel``.
 
     Returns
     -------
     Chains
     """
+    mode = _backend(backend, parallel, sampler, checkpoint_dir)
     start_list = _start_list(starts, n_chains)
     n_chains = len(start_list)
     children = np.random.SeedSequence(seed).spawn(n_chains)
+    if mode == "vectorised":
+        return _named(
+            _run_vectorised(sampler, log_density, start_list, n_draws, children, callback),
+            names,
+            seed,
+        )
     checkpoints: list[ChainCheckpoint | None] = [
         None
         if checkpoint_dir is None
         else ChainCheckpoint(Path(checkpoint_dir) / f"chain-{k}.npz", checkpoint_seconds)
         for k in range(n_chains)
     ]
-    if parallel and n_chains > 1:
+    if mode == "processes" and n_chains > 1:
         _check_picklable(log_density, sampler, starts)
         results = _run_parallel(
             sampler, log_density, start_list, n_draws, children, max_workers, callback, checkpoints
@@ -193,11 +219,61 @@ def run_chains(
                     sampler, log_density, start_list[k], n_draws, child, report, checkpoints[k]
                 )
             )
+    return _named(results, names, seed)
+
+
+def _named(results: Sequence[SamplerResult], names: Sequence[str] | None, seed: int) -> Chains:
     d = results[0].draws.shape[1]
     chain_names = tuple(names) if names is not None else tuple(f"x{i}" for i in range(d))
     if len(chain_names) != d:
         raise ConfigError(f"got {len(chain_names)} parameter names for {d} coordinates")
     return Chains(tuple(results), chain_names, int(seed))
+
+
+def _backend(
+    backend: str | None,
+    parallel: bool,
+    sampler: Sampler,
+    checkpoint_dir: str | os.PathLike[str] | None,
+) -> str:
+    mode = ("processes" if parallel else "serial") if backend is None else backend
+    if mode not in BACKENDS:
+        raise ConfigError(f"chain backend must be one of {list(BACKENDS)}, got {backend!r}")
+    if mode == "vectorised":
+        if not isinstance(sampler, MetropolisWithinGibbs):
+            raise ConfigError(
+                f"backend 'vectorised' needs a MetropolisWithinGibbs sampler, "
+                f"got {type(sampler).__name__}",
+                hint="use backend 'serial' or 'processes' for this sampler",
+            )
+        if checkpoint_dir is not None:
+            raise ConfigError(
+                "backend 'vectorised' does not write checkpoints, got checkpoint_dir="
+                f"{str(checkpoint_dir)!r}",
+                hint="drop checkpoint_dir or use backend 'serial' or 'processes'",
+            )
+    return mode
+
+
+def _run_vectorised(
+    sampler: Sampler,
+    log_density: LogDensity,
+    starts: list[Any],
+    n_draws: int,
+    children: list[np.random.SeedSequence],
+    callback: Callback | None,
+) -> list[SamplerResult]:
+    """All chains in lockstep; chain ``k`` draws its start from its own generator first."""
+    if not isinstance(sampler, MetropolisWithinGibbs):  # pragma: no cover - checked before
+        raise ConfigError("backend 'vectorised' needs a MetropolisWithinGibbs sampler")
+    rngs = [np.random.default_rng(child) for child in children]
+    x0 = np.array(
+        [
+            np.asarray(s(rng) if callable(s) else s, dtype=float).reshape(-1)
+            for s, rng in zip(starts, rngs, strict=True)
+        ]
+    )
+    return run_lockstep(sampler, as_lockstep(log_density), x0, n_draws, rngs, callback)
 
 
 def _start_list(starts: ArrayLike | StartFunction, n_chains: int | None) -> list[Any]:
