@@ -19,6 +19,7 @@ from bayescal import examples
 from bayescal.cli import copy_example
 from bayescal.config import load_study
 from bayescal.config_simulators import WallSimulator
+from bayescal.emulator.assemble import runs_to_columns
 from bayescal.pipeline import Options, Results, run
 
 DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
@@ -36,19 +37,31 @@ CATALOGUE = [
     (0.010, 1.0, 1200.0, 1000.0),
 ]
 
-#: Reduced sizes: 16 runs (5 per parameter plus one) and short chains; enough for
-#: three parameters that the 27 training days identify sharply.
+#: Reduced sizes: the full 50 runs (with 25, one chain stuck in a spurious mode of the
+#: cruder emulator at a corner of the prior) and short chains; enough for the five
+#: parameters that the 27 training days identify sharply. NUTS as in the example
+#: (the posterior is correlated: Metropolis-within-Gibbs with 4 x (400 + 600) left
+#: R-hat 2.1; JAX comes with the dev extra that `make test` installs). The
+#: difference process is on, with short chains, so that all three models are
+#: compared.
 REDUCED = """
 [design]
-runs = 16
+runs = 50
 
 [emulator]
 pca_variance = 0.999
+history_periods = 1
 burn = 150
 samples = 150
 
 [calibration]
 chains = 4
+sampler = "nuts"
+burn = 300
+samples = 500
+
+[discrepancy]
+enabled = true
 burn = 400
 samples = 600
 
@@ -72,6 +85,8 @@ def test_example_is_listed_ships_no_data_and_uses_the_catalogue() -> None:
     by_target = {t: p for p in study.parameters.values() for t in p.targets}
     catalogue = {"brick.conductivity": 0.22, "brick.specific_heat": 1000.0}
     catalogue["eps.conductivity"] = 0.04
+    catalogue["plaster_in.specific_heat"] = 1000.0
+    catalogue["measured.heat_flux_in.offset"] = 0.0  # the plate read true
     for target, value in catalogue.items():
         p = by_target[target]
         assert p.nominal == value, target
@@ -115,15 +130,29 @@ def _column(table: pd.DataFrame, name: str) -> dict[str, float]:
 
 
 def _least_squares_optimum(res: Results) -> np.ndarray:
-    """The simulator fitted directly to the training periods (no emulator, no MCMC)."""
+    """The simulator fitted directly to the training periods (no emulator, no MCMC).
+
+    Fitted in the metric the calibration's likelihood (eq. 16) sees the data in:
+    the measured periods enter it only through their basis weights ``w*``
+    (standardised per sample, projected on the PCA basis ``K``), with precision
+    ``lambda* K^T K``. So the residual is ``sqrt(k_j^T k_j) (w_j(theta) - w*_j)``
+    over all bases and training periods, where ``w(theta)`` are the weights of the
+    simulator's output at ``theta``. (A plain least-squares fit of the flux series
+    also counts what the basis leaves out and weights the hours of the day equally;
+    on this wall it lands up to 3 posterior SDs away, docs/case-studies.md.)
+    """
     ctx = res.context
+    assert res.emulator is not None
+    assembled = res.emulator.assembled
     names = list(ctx.study.parameters)
     layout = ctx.measured.layout
-    measured = layout.cut(ctx.measured.outputs["heat_flux_in"]).ravel()
+    root_ktk = np.sqrt(assembled.basis.ktk)
 
     def residual(theta: np.ndarray) -> np.ndarray:
         out = ctx.simulator.simulate(dict(zip(names, theta, strict=True)), ctx.measured.forcing)
-        return layout.cut(out["heat_flux_in"]).ravel() - measured
+        periods = runs_to_columns(layout.cut(out["heat_flux_in"][None]))
+        w = assembled.basis.weights(assembled.outputs.apply({"heat_flux_in": periods}))
+        return ((w - assembled.w_star) * root_ktk).ravel()
 
     nominal = np.array([p.nominal for p in ctx.study.parameters.values()])
     lower = np.array([p.prior.lower for p in ctx.study.parameters.values()])
@@ -135,13 +164,26 @@ def _least_squares_optimum(res: Results) -> np.ndarray:
 
 @pytest.mark.slow
 @pytest.mark.shared_data
-def test_calibration_improves_the_training_fit(results: Results) -> None:
-    # Only the training window is guaranteed to improve: it is what was fitted. On
-    # the real wall the held-out week is not (docs/case-studies.md).
-    assert _metric(results, "calibrated", "train") < _metric(results, "nominal", "train")
-    # The nominal model reaches about 0.45 W/m² (tests/test_wall.py: < 0.6 on the
-    # whole record); the calibrated one must not be worse than that requirement.
-    assert _metric(results, "calibrated", "train") < 0.6
+def test_calibration_beats_the_catalogue_wall_on_both_windows(results: Results) -> None:
+    # The issue's bar: the nominal wall reaches about 0.45 W/m² on the training days
+    # (0.28 on the held-out week); a calibration worth the name must beat it on
+    # the held-out window. The full-size run gains 28 % there (docs/case-studies.md);
+    # the reduced one here must gain at least 10 %.
+    for window in ("train", "test"):
+        nominal = _metric(results, "nominal", window)
+        assert _metric(results, "calibrated", window) < 0.9 * nominal, window
+    assert _metric(results, "nominal", "train") == pytest.approx(0.447, abs=0.01)
+
+
+@pytest.mark.slow
+@pytest.mark.shared_data
+def test_difference_process_fits_the_training_residual(results: Results) -> None:
+    # Delta is fitted to what the calibrated wall leaves on the training days, so
+    # there it must take most of the remaining error away. On the held-out week it
+    # extrapolates and is not required to help (it does not: docs/case-studies.md).
+    calibrated = _metric(results, "calibrated", "train")
+    assert _metric(results, "calibrated+delta", "train") < 0.6 * calibrated
+    assert np.isfinite(_metric(results, "calibrated+delta", "test"))
 
 
 @pytest.mark.slow
@@ -157,8 +199,9 @@ def test_posterior_is_inside_the_prior_and_matches_a_direct_fit(results: Results
         # Away from the bounds: the data, not the prior, locate every parameter.
         assert p.prior.lower + 0.1 * width < mean < p.prior.upper - 0.1 * width, name
         # Flat prior and ~1300 training samples: the posterior mean is the
-        # simulator's least-squares optimum up to emulator error and Monte Carlo
-        # error of the short chains (posterior SDs are 2-3 % of the prior width).
+        # simulator's least-squares optimum in the likelihood's metric, up to
+        # emulator error and Monte Carlo error of the short chains (posterior SDs
+        # are 1-3 % of the prior widths).
         assert abs(mean - optimum[k]) < 0.05 * width, name
 
 
@@ -173,10 +216,9 @@ def test_diagnostics_are_computed(results: Results) -> None:
     for name in [*results.context.study.parameters, "lambda", "lambda_star"]:
         assert ess_bulk[name] > 0, name  # a NaN fails too
         assert ess_tail[name] > 0, name
-        # Four chains of 600 kept draws: R-hat is computed and near 1 even when
-        # short chains leave the ESS below the 400 the full run asks for.
-        assert 0.99 < r_hat[name] < 1.2, name
-    assert post.draws.shape[:2] == (4, 600)
+        # Four NUTS chains of 500 kept draws: R-hat near 1 (the full run: <= 1.003).
+        assert 0.99 < r_hat[name] < 1.05, name
+    assert post.draws.shape[:2] == (4, 500)
 
 
 @pytest.mark.slow

@@ -526,6 +526,21 @@ class DiscrepancySection(_Section):
     enabled: bool = _f("Estimate Delta(x).", True, default=False)
     realisations: int = _f("Posterior realisations b per update.", 50, default=50, ge=2)
     update_interval: int = _f("MCMC iterations between updates.", 100, default=100, ge=1)
+    burn: int | None = _f(
+        "Burn-in iterations per chain of the discrepancy phase (Metropolis-within-Gibbs "
+        "with Delta updates, whatever [calibration] sampler says); [calibration] burn if "
+        "omitted. Set it when the calibration uses 'nuts', whose short runs are too short "
+        "for random-walk chains.",
+        4000,
+        default=None,
+        ge=0,
+    )
+    samples: int | None = _f(
+        "Iterations kept per chain of the discrepancy phase; [calibration] samples if omitted.",
+        10000,
+        default=None,
+        ge=1,
+    )
 
 
 class PredictSection(_Section):

@@ -308,7 +308,9 @@ def discrepancy_stage(ctx: Context, em: EmulatorResult, posterior: Posterior) ->
     from bayescal.discrepancy import estimate_discrepancy
 
     cal = ctx.study.calibration
-    tick, close = _mcmc_tick(ctx, "discrepancy", cal.chains * (cal.burn + cal.samples))
+    n_burn = cal.burn if section.burn is None else section.burn
+    n_draws = cal.samples if section.samples is None else section.samples
+    tick, close = _mcmc_tick(ctx, "discrepancy", cal.chains * (n_burn + n_draws))
     try:
         return estimate_discrepancy(
             em.emulator,
@@ -317,8 +319,8 @@ def discrepancy_stage(ctx: Context, em: EmulatorResult, posterior: Posterior) ->
             realisations=section.realisations,
             update_interval=section.update_interval,
             n_chains=cal.chains,
-            n_burn=cal.burn,
-            n_draws=cal.samples,
+            n_burn=n_burn,
+            n_draws=n_draws,
             seed=ctx.seed("discrepancy"),
             backend=ctx.options.chains_backend,  # type: ignore[arg-type]
             callback=tick,
