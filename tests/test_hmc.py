@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 import pytest
 
+from bayescal import config
 from bayescal.calibration import hmc
 from bayescal.calibration.posterior import CalibrationPosterior, Posterior, calibrate
 from bayescal.config import CalibrationSection, study_from_dict
@@ -253,7 +254,22 @@ def test_nuts_needs_the_kronecker_algebra_and_a_warm_up(
         calibrate(em, a, n_burn=0, n_draws=10, sampler="nuts")
 
 
-def test_sampler_option_round_trips_and_is_checked() -> None:
+def test_study_with_nuts_but_without_the_extra_fails_at_load(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    # Checked when the study is read (bayescal validate, before any stage runs),
+    # not after the simulations and the emulator training.
+    monkeypatch.setitem(sys.modules, "blackjax", None)  # find_spec -> ValueError
+    raw = copy.deepcopy(BASE)
+    raw.setdefault("calibration", {})["sampler"] = "nuts"
+    with pytest.raises(ConfigError, match=r"'nuts' needs blackjax, which is not installed") as info:
+        study_from_dict(raw, root=FIXTURE)
+    assert 'pip install "bayescal[hmc]"' in str(info.value)
+    assert "\n" not in str(info.value)
+
+
+def test_sampler_option_round_trips_and_is_checked(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(config, "_installed", lambda module: True)  # with or without JAX
     assert CalibrationSection().sampler == "mwg"
     raw = copy.deepcopy(BASE)
     raw.setdefault("calibration", {})["sampler"] = "nuts"
@@ -268,6 +284,7 @@ def test_sampler_option_round_trips_and_is_checked() -> None:
 
 
 def test_pipeline_stage_passes_the_sampler(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(config, "_installed", lambda module: True)
     raw = copy.deepcopy(BASE)
     raw.setdefault("calibration", {})["sampler"] = "nuts"
     study = study_from_dict(raw, root=FIXTURE)

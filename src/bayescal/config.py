@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import difflib
 import hashlib
+import importlib.util
 import json
 import os
 import tomllib
@@ -647,6 +648,7 @@ class Study(_Section):
     @model_validator(mode="after")
     def _cross_checks(self) -> Study:
         problems = _target_problems(self) + _output_problems(self) + _period_problems(self)
+        problems += _sampler_problems(self)
         if self.design.runs < len(self.parameters) + 2:
             problems.append(
                 f"design.runs: {self.design.runs} runs for {len(self.parameters)} parameters; "
@@ -778,6 +780,45 @@ def _period_problems(study: Study) -> list[str]:
     ]
     if isinstance(periods.length, timedelta) and periods.length < 2 * step:
         problems.append(f"periods.length: {format_duration(periods.length)} is under 2 steps")
+    return problems
+
+
+#: Warm-up iterations NUTS needs at least (its window adaptation fails on fewer).
+NUTS_MIN_WARMUP = 20
+
+
+def _installed(module: str) -> bool:
+    """Whether ``module`` can be imported, without importing it."""
+    try:
+        return importlib.util.find_spec(module) is not None
+    except (ImportError, ValueError):
+        return False
+
+
+def _sampler_problems(study: Study) -> list[str]:
+    """What ``[calibration] sampler = "nuts"`` needs, checked before any stage runs."""
+    cal = study.calibration
+    if cal.sampler != "nuts":
+        return []
+    problems = []
+    missing = [m for m in ("jax", "blackjax") if not _installed(m)]
+    if missing:
+        problems.append(
+            f"calibration.sampler: 'nuts' needs {' and '.join(missing)}, which "
+            f"{'is' if len(missing) == 1 else 'are'} not installed; "
+            'pip install "bayescal[hmc]", or set sampler = "mwg"'
+        )
+    if cal.burn < NUTS_MIN_WARMUP:
+        problems.append(
+            f"calibration.burn: {cal.burn} warm-up iterations for sampler 'nuts'; its step-size "
+            f"adaptation needs at least {NUTS_MIN_WARMUP} (500 is a good choice)"
+        )
+    if study.emulator.algebra != "kronecker":
+        problems.append(
+            f"calibration.sampler: 'nuts' evaluates the likelihood by the Kronecker route, "
+            f"got emulator.algebra = {study.emulator.algebra!r}; set it to 'kronecker' or "
+            "use sampler = 'mwg'"
+        )
     return problems
 
 

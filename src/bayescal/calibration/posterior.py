@@ -39,6 +39,7 @@ from bayescal.calibration.diagnostics import Diagnostics, _arviz, diagnose
 from bayescal.calibration.hmc import check_installed, sample_nuts_isolated
 from bayescal.calibration.samplers.mwg import MetropolisWithinGibbs
 from bayescal.calibration.samplers.rwm import AdaptiveMetropolis
+from bayescal.config import NUTS_MIN_WARMUP
 from bayescal.design import Prior, UniformPrior
 from bayescal.emulator.assemble import Assembled
 from bayescal.emulator.gp import Emulator
@@ -55,7 +56,6 @@ __all__ = ["CalibrationPosterior", "Posterior", "calibrate"]
 Backend = Literal["processes", "serial", "vectorised"]
 SamplerKind = Literal["mwg", "block", "nuts"]
 LAMBDA_NAMES = ("lambda", "lambda_star")
-NUTS_MIN_WARMUP = 20  # window adaptation needs some iterations (0 fails inside BlackJAX)
 
 
 def _log_gamma(value: float, shape: float, rate: float) -> float:
