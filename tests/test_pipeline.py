@@ -191,4 +191,7 @@ def test_discrepancy_and_report_through_the_pipeline(tmp_path: Path) -> None:
     assert res.report is not None
     html = res.report.read_text(encoding="utf-8")
     assert "Discrepancy" in html
+    # The settings table names the samplers and each phase's own chain lengths.
+    assert "Metropolis-within-Gibbs, 4 chains x (400 + 600)" in html
+    assert "Metropolis-within-Gibbs with Delta updates, 4 chains x (300 + 500)" in html
     assert (folder / "out" / "discrepancy.nc").is_file()

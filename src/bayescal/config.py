@@ -657,6 +657,17 @@ class Study(_Section):
         _fail(problems)
         return self
 
+    def discrepancy_lengths(self) -> tuple[int, int]:
+        """Burn-in and kept iterations per chain of the discrepancy phase.
+
+        ``[discrepancy] burn`` and ``samples`` where given, else ``[calibration]``'s.
+        """
+        d, cal = self.discrepancy, self.calibration
+        return (
+            cal.burn if d.burn is None else d.burn,
+            cal.samples if d.samples is None else d.samples,
+        )
+
     def config_hash(self) -> str:
         """SHA-256 (hex) of the canonical JSON of the validated configuration.
 

@@ -400,6 +400,9 @@ def _delta_correlation(res: Results) -> pd.DataFrame:
     return pd.DataFrame(table).T
 
 
+_SAMPLER_NAMES = {"mwg": "Metropolis-within-Gibbs", "nuts": "NUTS"}
+
+
 def _settings(res: Results) -> dict[str, object]:
     s = res.context.study
     em = res.emulator
@@ -410,12 +413,18 @@ def _settings(res: Results) -> dict[str, object]:
         "samples per period": res.context.measured.layout.period,
         "test samples": res.context.measured.layout.test,
         "emulator MCMC (burn + kept, 2 chains)": f"{s.emulator.burn} + {s.emulator.samples}",
-        "calibration MCMC": f"{s.calibration.chains} chains x ({s.calibration.burn} + "
-        f"{s.calibration.samples})",
+        "calibration MCMC": f"{_SAMPLER_NAMES[s.calibration.sampler]}, "
+        f"{s.calibration.chains} chains x ({s.calibration.burn} + {s.calibration.samples})",
         "algebra": s.emulator.algebra,
         "discrepancy": s.discrepancy.enabled,
         "seed": s.study.seed,
     }
+    if s.discrepancy.enabled:
+        burn, kept = s.discrepancy_lengths()
+        out["discrepancy MCMC"] = (
+            f"Metropolis-within-Gibbs with Delta updates, {s.calibration.chains} chains x "
+            f"({burn} + {kept})"
+        )
     if em is not None:
         out["basis vectors p"] = em.emulator.basis.p
         out["variable inputs x"] = ", ".join(em.emulator.inputs.labels)

@@ -308,8 +308,7 @@ def discrepancy_stage(ctx: Context, em: EmulatorResult, posterior: Posterior) ->
     from bayescal.discrepancy import estimate_discrepancy
 
     cal = ctx.study.calibration
-    n_burn = cal.burn if section.burn is None else section.burn
-    n_draws = cal.samples if section.samples is None else section.samples
+    n_burn, n_draws = ctx.study.discrepancy_lengths()
     tick, close = _mcmc_tick(ctx, "discrepancy", cal.chains * (n_burn + n_draws))
     try:
         return estimate_discrepancy(
