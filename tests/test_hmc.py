@@ -269,7 +269,7 @@ def test_study_with_nuts_but_without_the_extra_fails_at_load(
 
 
 def test_sampler_option_round_trips_and_is_checked(monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setattr(config, "_installed", lambda module: True)  # with or without JAX
+    monkeypatch.setattr(config, "module_installed", lambda module: True)  # with or without JAX
     assert CalibrationSection().sampler == "mwg"
     raw = copy.deepcopy(BASE)
     raw.setdefault("calibration", {})["sampler"] = "nuts"
@@ -284,7 +284,7 @@ def test_sampler_option_round_trips_and_is_checked(monkeypatch: pytest.MonkeyPat
 
 
 def test_pipeline_stage_passes_the_sampler(monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setattr(config, "_installed", lambda module: True)
+    monkeypatch.setattr(config, "module_installed", lambda module: True)
     raw = copy.deepcopy(BASE)
     raw.setdefault("calibration", {})["sampler"] = "nuts"
     study = study_from_dict(raw, root=FIXTURE)
@@ -294,3 +294,22 @@ def test_pipeline_stage_passes_the_sampler(monkeypatch: pytest.MonkeyPatch) -> N
     em = SimpleNamespace(emulator=None, assembled=None)
     stages.calibrate_stage(ctx, em)  # type: ignore[arg-type]
     assert seen["sampler"] == "nuts"
+
+
+def test_sampler_warnings_are_appended_to_the_diagnostics() -> None:
+    rng = np.random.default_rng(0)
+    priors = {"a": BetaPrior(0.0, 1.0, 2.0, 2.0)}
+    common = dict(
+        names=["a"],
+        priors=priors,
+        unit_draws=rng.uniform(0.2, 0.8, (4, 50, 1)),
+        lam=rng.uniform(1.0, 2.0, (4, 50)),
+        lam_star=rng.uniform(1.0, 2.0, (4, 50)),
+        log_density=rng.normal(size=(4, 50)),
+        acceptance=np.full((4, 3), 0.9),
+        seed=0,
+        algebra="kronecker",
+    )
+    plain = Posterior.build(**common)  # type: ignore[arg-type]
+    flagged = Posterior.build(**common, sampler_warnings=["chain 3 had 2 divergent"])  # type: ignore[arg-type]
+    assert flagged.warnings == (*plain.warnings, "chain 3 had 2 divergent")

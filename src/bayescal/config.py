@@ -40,6 +40,7 @@ from pydantic import (
 from bayescal.config_simulators import (
     _KIND_UNITS,
     _NAME,
+    SENSOR_PREFIX,
     BoxSimulator,
     CommandOutputs,
     CommandSection,
@@ -692,8 +693,8 @@ def _target_problems(study: Study) -> list[str]:
     for name, parameter in study.parameters.items():
         key = f"parameters.{name}"
         kinds: set[str] = set()
-        sensors = [_sensor_target(t) for t in parameter.targets]
-        if any(s is not None for s in sensors) and any(s is None for s in sensors):
+        sensors = [t.startswith(SENSOR_PREFIX) for t in parameter.targets]
+        if any(sensors) and not all(sensors):
             problems.append(
                 f"{key}.targets: mixes a sensor target ('measured.…') with simulator "
                 "targets; give the sensor its own parameter"
@@ -701,8 +702,8 @@ def _target_problems(study: Study) -> list[str]:
             continue
         for target, sensor in zip(parameter.targets, sensors, strict=True):
             try:
-                if sensor is not None:
-                    problems += _sensor_problems(study, key, parameter.unit, sensor)
+                if sensor:
+                    problems += _sensor_problems(study, key, parameter.unit, target)
                     kind, canonical = None, target
                 else:
                     kind = simulator.target_kind(target)
@@ -725,18 +726,15 @@ def _target_problems(study: Study) -> list[str]:
     return problems
 
 
-def _sensor_target(target: str) -> tuple[str, str] | None:
-    try:
-        return parse_sensor_target(target)
-    except ValueError:
-        return ("", target)  # malformed: _sensor_problems reports it
+def _sensor_problems(study: Study, key: str, unit: str, target: str) -> list[str]:
+    """Problems of one ``measured.<output>.<offset|gain>`` target.
 
-
-def _sensor_problems(study: Study, key: str, unit: str, sensor: tuple[str, str]) -> list[str]:
-    """Problems of one ``measured.<output>.<offset|gain>`` target."""
+    A malformed target or an output not calibrated on raises ValueError (reported
+    under ``targets``); a wrong unit is returned (reported under ``unit``).
+    """
+    sensor = parse_sensor_target(target)
+    assert sensor is not None  # the caller checked the prefix
     output, prop = sensor
-    if not output:
-        parse_sensor_target(prop)  # raises its ValueError for the malformed target
     if output not in study.outputs.calibrate:
         raise ValueError(
             f"'measured.{output}.{prop}': {output!r} is not calibrated on; outputs.calibrate "
@@ -798,7 +796,7 @@ def _period_problems(study: Study) -> list[str]:
 NUTS_MIN_WARMUP = 20
 
 
-def _installed(module: str) -> bool:
+def module_installed(module: str) -> bool:
     """Whether ``module`` can be imported, without importing it."""
     try:
         return importlib.util.find_spec(module) is not None
@@ -812,7 +810,7 @@ def _sampler_problems(study: Study) -> list[str]:
     if cal.sampler != "nuts":
         return []
     problems = []
-    missing = [m for m in ("jax", "blackjax") if not _installed(m)]
+    missing = [m for m in ("jax", "blackjax") if not module_installed(m)]
     if missing:
         problems.append(
             f"calibration.sampler: 'nuts' needs {' and '.join(missing)}, which "

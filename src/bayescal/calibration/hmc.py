@@ -36,7 +36,6 @@ with any ``spawn``, a script that calls it must guard its top level with
 
 from __future__ import annotations
 
-import importlib.util
 import math
 import multiprocessing
 import resource
@@ -52,6 +51,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import special
 
+from bayescal.config import module_installed
 from bayescal.design import BetaPrior, Prior, UniformPrior
 from bayescal.emulator.dense import GridData
 from bayescal.emulator.kernel import LOG_2PI, FloatArray
@@ -86,11 +86,7 @@ def _missing(name: str | None) -> ConfigError:
 def check_installed() -> None:
     """Raise the one-line ConfigError of :func:`require_jax` without importing anything."""
     for name in ("jax", "blackjax"):
-        try:
-            found = importlib.util.find_spec(name) is not None
-        except (ImportError, ValueError):
-            found = False
-        if not found:
+        if not module_installed(name):
             raise _missing(name)
 
 

@@ -169,14 +169,21 @@ class Posterior:
         acceptance: ArrayLike,
         seed: int,
         algebra: str,
+        sampler_warnings: Sequence[str] = (),
     ) -> Posterior:
-        """Assemble the posterior and compute its diagnostics (physical units)."""
+        """Assemble the posterior and compute its diagnostics (physical units).
+
+        ``sampler_warnings`` (e.g. NUTS divergences) are appended to the
+        diagnostics' warnings.
+        """
         unit = np.asarray(unit_draws, dtype=float)
         lam_arr, lam_s = np.asarray(lam, dtype=float), np.asarray(lam_star, dtype=float)
         phys = np.stack([p.from_unit(unit[..., k]) for k, p in enumerate(priors.values())], axis=-1)
         everything = np.concatenate([phys, lam_arr[..., None], lam_s[..., None]], axis=-1)
         acc = np.asarray(acceptance, dtype=float)
         diag = diagnose(everything, (*names, *LAMBDA_NAMES), acc)
+        if sampler_warnings:
+            diag = dataclasses.replace(diag, warnings=(*diag.warnings, *sampler_warnings))
         return cls(
             tuple(names),
             dict(priors),
@@ -430,7 +437,13 @@ def _calibrate_nuts(
     result = sample_nuts_isolated(target, starts, n_burn, n_draws, seed, callback=callback)
     t = target.t
     acceptance = np.repeat(result.chains.acceptance[:, None], t + 2, axis=1)
-    post = Posterior.build(
+    divergences = [
+        f"chain {c} had {n} divergent NUTS transitions after warm-up; the posterior may be "
+        "biased: lengthen the warm-up ([calibration] burn) or use sampler 'mwg'"
+        for c, n in enumerate(result.chains.divergent)
+        if n > 0
+    ]
+    return Posterior.build(
         names=names,
         priors=prior_map,
         unit_draws=result.draws[..., :t],
@@ -440,14 +453,5 @@ def _calibrate_nuts(
         acceptance=acceptance,
         seed=int(seed),
         algebra="kronecker",
+        sampler_warnings=divergences,
     )
-    found = [
-        f"chain {c} had {n} divergent NUTS transitions after warm-up; the posterior may be "
-        "biased: lengthen the warm-up ([calibration] burn) or use sampler 'mwg'"
-        for c, n in enumerate(result.chains.divergent)
-        if n > 0
-    ]
-    if not found:
-        return post
-    diag = dataclasses.replace(post.diagnostics, warnings=(*post.warnings, *found))
-    return dataclasses.replace(post, diagnostics=diag)

@@ -46,7 +46,22 @@ if TYPE_CHECKING:
 
 
 @dataclass(frozen=True)
-class TargetedSimulator:
+class _Wrapped:
+    """A simulator wrapped around ``inner``, with its boundary conditions and outputs."""
+
+    inner: Simulator
+
+    @property
+    def input_names(self) -> tuple[str, ...]:
+        return self.inner.input_names
+
+    @property
+    def output_names(self) -> tuple[str, ...]:
+        return self.inner.output_names
+
+
+@dataclass(frozen=True)
+class TargetedSimulator(_Wrapped):
     """Expose a simulator whose own parameters are fixed names under study names.
 
     Each study parameter sets one or more of the inner simulator's parameters
@@ -60,20 +75,11 @@ class TargetedSimulator:
         Study parameter name -> inner parameter names.
     """
 
-    inner: Simulator
     targets: Mapping[str, tuple[str, ...]]
 
     @property
     def parameter_names(self) -> tuple[str, ...]:
         return tuple(self.targets)
-
-    @property
-    def input_names(self) -> tuple[str, ...]:
-        return self.inner.input_names
-
-    @property
-    def output_names(self) -> tuple[str, ...]:
-        return self.inner.output_names
 
     def simulate(self, parameters: Mapping[str, float], forcing: Forcing) -> dict[str, np.ndarray]:
         check_parameters(parameters, self.parameter_names, type(self.inner).__name__)
@@ -82,7 +88,7 @@ class TargetedSimulator:
 
 
 @dataclass(frozen=True)
-class SensorModel:
+class SensorModel(_Wrapped):
     """A simulator whose outputs pass through calibrated sensors.
 
     ``reading = gain * simulated + offset`` per output, with gains and offsets
@@ -100,21 +106,12 @@ class SensorModel:
         Study parameter name -> its ``(output, "gain" | "offset")`` targets.
     """
 
-    inner: Simulator
     names: tuple[str, ...]
     sensors: Mapping[str, tuple[tuple[str, str], ...]]
 
     @property
     def parameter_names(self) -> tuple[str, ...]:
         return self.names
-
-    @property
-    def input_names(self) -> tuple[str, ...]:
-        return self.inner.input_names
-
-    @property
-    def output_names(self) -> tuple[str, ...]:
-        return self.inner.output_names
 
     def simulate(self, parameters: Mapping[str, float], forcing: Forcing) -> dict[str, np.ndarray]:
         check_parameters(parameters, self.parameter_names, type(self.inner).__name__)
