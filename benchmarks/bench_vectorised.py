@@ -33,22 +33,23 @@ for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ[_var] = "1"
 
 import argparse  # noqa: E402
-import math  # noqa: E402
 import statistics  # noqa: E402
 import sys  # noqa: E402
 import time  # noqa: E402
-import warnings  # noqa: E402
 from dataclasses import dataclass  # noqa: E402
 from pathlib import Path  # noqa: E402
-from typing import Any  # noqa: E402
 
 import numpy as np  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 
 from bayescal.calibration.chains import run_chains  # noqa: E402
-from bayescal.calibration.posterior import CalibrationPosterior  # noqa: E402
-from bayescal.calibration.samplers.mwg import MetropolisWithinGibbs  # noqa: E402
+from bayescal.calibration.diagnostics import _arviz  # noqa: E402
+from bayescal.calibration.posterior import (  # noqa: E402
+    CalibrationPosterior,
+    _sampler,
+    _starts,
+)
 from bayescal.emulator.assemble import Assembled, assemble  # noqa: E402
 from bayescal.emulator.gp import Emulator, train  # noqa: E402
 from bayescal.emulator.kron import make_algebra  # noqa: E402
@@ -76,14 +77,6 @@ CONFIGS = (
 )
 
 
-def _arviz() -> Any:
-    with warnings.catch_warnings():
-        warnings.filterwarnings("ignore", category=FutureWarning)
-        import arviz
-
-    return arviz
-
-
 def build(runs: int, periods: int) -> tuple[Emulator, Assembled]:
     """Simulate, assemble and train the emulator as bench_calibration.py does."""
     ve = virtual_experiment(seed=0, runs=runs, periods=periods)
@@ -99,35 +92,6 @@ def target(em: Emulator, a: Assembled) -> CalibrationPosterior:
     return CalibrationPosterior(alg, list(a.priors.values()), em.lam_prior, a.lam_star_prior)
 
 
-def sampler(post: CalibrationPosterior, n_burn: int) -> MetropolisWithinGibbs:
-    """The settings of ``posterior.calibrate`` for sampler ``"mwg"``."""
-    t = post.t
-    scales = [0.5] * t + [
-        2.4 / math.sqrt(post.lam_prior[0]),
-        2.4 / math.sqrt(post.lam_star_prior[0]),
-    ]
-    return MetropolisWithinGibbs(
-        n_burn=n_burn,
-        lower=[0.0] * (t + 2),
-        upper=[1.0] * t + [math.inf, math.inf],
-        scales=scales,
-        batch_size=25,
-        max_adapt=0.25,
-    )
-
-
-def starts(post: CalibrationPosterior, n_chains: int) -> np.ndarray:
-    """Dispersed starts as ``posterior.calibrate`` draws them (strata and prior draws)."""
-    rng = np.random.default_rng([3, 2])
-    t = post.t
-    strata = (
-        np.argsort(rng.random((t, n_chains)), axis=1).T + rng.random((n_chains, t))
-    ) / n_chains
-    lam = rng.gamma(post.lam_prior[0], 1.0 / post.lam_prior[1], n_chains)
-    lam_star = rng.gamma(post.lam_star_prior[0], 1.0 / post.lam_star_prior[1], n_chains)
-    return np.column_stack([0.05 + 0.9 * strata, lam, lam_star])
-
-
 def run_one(
     cfg: Config, em: Emulator, a: Assembled, n_burn: int, n_draws: int
 ) -> tuple[float, float]:
@@ -135,9 +99,9 @@ def run_one(
     post = target(em, a)
     start = time.perf_counter()
     chains = run_chains(
-        sampler(post, n_burn),
+        _sampler("mwg", post, n_burn),
         post,
-        starts(post, cfg.n_chains),
+        _starts(post, cfg.n_chains, np.random.default_rng([3, 2])),
         n_draws,
         seed=3,
         backend=cfg.backend,  # type: ignore[arg-type]

@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import warnings
 from typing import Any
 
 import numpy as np
@@ -25,6 +24,7 @@ from numpy.typing import NDArray
 from scipy import stats
 
 from bayescal.calibration import MetropolisWithinGibbs, run_chains
+from bayescal.calibration.diagnostics import _arviz
 from bayescal.calibration.posterior import CalibrationPosterior
 from bayescal.calibration.samplers import AdaptiveMetropolis
 from bayescal.calibration.samplers.mwg_batch import BatchedPosterior, as_lockstep, run_lockstep
@@ -38,17 +38,6 @@ N_SE = 4.0  # tolerance in Monte Carlo standard errors (see module docstring)
 # sums over p (R m* + m*) terms differs, a relative error of a few 1e-16 of the
 # sum of |terms|. 1e-12 of that sum leaves a margin of three orders.
 REL = 1e-12
-
-
-def _arviz() -> Any:
-    """ArviZ without its once-a-day FutureWarning about its own 1.0 migration."""
-    with warnings.catch_warnings():
-        warnings.filterwarnings(
-            "ignore", message=r"\s*ArviZ is undergoing a major refactor", category=FutureWarning
-        )
-        import arviz
-
-    return arviz
 
 
 def _density(seed: int = 0, runs: int = 12, periods: int = 8) -> KronCalibrationDensity:

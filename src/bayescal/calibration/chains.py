@@ -23,7 +23,7 @@ from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wai
 from dataclasses import dataclass
 from multiprocessing import Manager
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any, Literal, get_args
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -38,7 +38,7 @@ StartFunction = Callable[[np.random.Generator], ArrayLike]
 """Draws a starting point (d,) with the chain's own generator."""
 
 ChainBackend = Literal["processes", "serial", "vectorised"]
-BACKENDS: tuple[str, ...] = ("processes", "serial", "vectorised")
+BACKENDS: tuple[str, ...] = get_args(ChainBackend)
 
 
 @dataclass(frozen=True)
@@ -264,8 +264,7 @@ def _run_vectorised(
     callback: Callback | None,
 ) -> list[SamplerResult]:
     """All chains in lockstep; chain ``k`` draws its start from its own generator first."""
-    if not isinstance(sampler, MetropolisWithinGibbs):  # pragma: no cover - checked before
-        raise ConfigError("backend 'vectorised' needs a MetropolisWithinGibbs sampler")
+    assert isinstance(sampler, MetropolisWithinGibbs)  # checked by _backend
     rngs = [np.random.default_rng(child) for child in children]
     x0 = np.array(
         [

@@ -34,7 +34,7 @@ from typing import TYPE_CHECKING, Any, Literal
 import numpy as np
 from numpy.typing import ArrayLike
 
-from bayescal.calibration.chains import run_chains
+from bayescal.calibration.chains import BACKENDS, ChainBackend, run_chains
 from bayescal.calibration.diagnostics import Diagnostics, _arviz, diagnose
 from bayescal.calibration.hmc import check_installed, sample_nuts_isolated
 from bayescal.calibration.samplers.mwg import MetropolisWithinGibbs
@@ -53,7 +53,7 @@ if TYPE_CHECKING:
 
 __all__ = ["CalibrationPosterior", "Posterior", "calibrate"]
 
-Backend = Literal["processes", "serial", "vectorised"]
+Backend = ChainBackend
 SamplerKind = Literal["mwg", "block", "nuts"]
 LAMBDA_NAMES = ("lambda", "lambda_star")
 
@@ -360,8 +360,8 @@ def calibrate(
     -------
     Posterior
     """
-    if backend not in ("processes", "serial", "vectorised"):
-        raise ConfigError(f"backend must be 'processes', 'serial' or 'vectorised', got {backend!r}")
+    if backend not in BACKENDS:
+        raise ConfigError(f"backend must be one of {list(BACKENDS)}, got {backend!r}")
     if sampler == "nuts":
         check_installed()
         if n_burn < NUTS_MIN_WARMUP:
@@ -402,7 +402,6 @@ def calibrate(
         n_draws,
         seed=seed,
         names=names,
-        parallel=backend == "processes",
         backend=backend,
         callback=callback,
         checkpoint_dir=checkpoint_dir,
