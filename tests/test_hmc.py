@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import copy
-import importlib.util
 import multiprocessing
 import sys
 import tomllib
@@ -28,7 +27,7 @@ from bayescal.errors import ConfigError
 from bayescal.pipeline import stages
 from virtual_wall import VirtualExperiment, virtual_experiment
 
-HAS_JAX = all(importlib.util.find_spec(m) is not None for m in ("jax", "blackjax"))
+HAS_JAX = all(config.module_installed(m) for m in ("jax", "blackjax"))
 needs_jax = pytest.mark.skipif(not HAS_JAX, reason="the extra bayescal[hmc] is not installed")
 FIXTURE = Path(__file__).resolve().parent / "data" / "wall-study"
 BASE = tomllib.loads((FIXTURE / "study.toml").read_text(encoding="utf-8"))

@@ -38,7 +38,6 @@ from __future__ import annotations
 
 import math
 import multiprocessing
-import resource
 import time
 from collections.abc import Callable, Sequence
 from concurrent.futures import ProcessPoolExecutor
@@ -691,9 +690,3 @@ def _drain(queue: Any, callback: Callable[[int], None], timeout: float, last: in
             timeout = 0.0
     except Empty:
         return last
-
-
-def children_cpu_seconds() -> float:
-    """CPU time [s] of the waited-for child processes (for benchmarks of the isolated run)."""
-    usage = resource.getrusage(resource.RUSAGE_CHILDREN)
-    return usage.ru_utime + usage.ru_stime
