@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import os
+import stat
 from pathlib import Path
 
 import numpy as np
@@ -52,6 +54,19 @@ def test_emulator_round_trip_predicts_identically(
         assert ds.attrs["config_hash"] == "abc123"
         assert ds.attrs["seed"] == 4
     assert [p.name for p in path.parent.iterdir()] == ["emulator.nc"]  # no temp file left
+
+
+def test_netcdf_artefacts_are_readable_by_others(
+    fitted: tuple[Assembled, Emulator, Posterior], tmp_path: Path
+) -> None:
+    # They used to be written 0600 (mkstemp's mode) while every other file got 0644.
+    _, em, post = fitted
+    old = os.umask(0o022)
+    try:
+        paths = [save_emulator(em, tmp_path / "e.nc"), save_posterior(post, tmp_path / "p.nc")]
+    finally:
+        os.umask(old)
+    assert [stat.S_IMODE(p.stat().st_mode) for p in paths] == [0o644, 0o644]
 
 
 def test_posterior_round_trip(

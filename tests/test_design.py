@@ -170,3 +170,14 @@ def test_from_values() -> None:
         Design.from_values(PRIORS, [[2.5, 2.0e6, 0.15]])
     with pytest.raises(ConfigError, match=r"shape \(runs, 3\), got \(1, 2\)"):
         Design.from_values(PRIORS, [[1.0, 2.0]])
+
+
+def test_prior_carries_unit_and_description_through_its_spec() -> None:
+    prior = prior_from_spec(
+        "beta", 0.08, 0.16, 1.0, 2.0, unit="W/(m·K)", description="conductivity of the blocks"
+    )
+    spec = prior.spec()
+    assert (spec["unit"], spec["description"]) == ("W/(m·K)", "conductivity of the blocks")
+    assert prior_from_spec(**spec) == prior
+    # Without them the spec stays as the study file writes a prior.
+    assert set(UniformPrior(0.0, 1.0).spec()) == {"distribution", "lower", "upper"}

@@ -11,17 +11,14 @@
   acceptance rates, priors, seed and config hash.
 
 Writes go to a hidden temporary file in the destination folder that is then
-renamed onto the final name (:mod:`bayescal.io`), so a crash never leaves a
+renamed onto the final name (:mod:`bayescal.atomic`), so a crash never leaves a
 half-written artefact.
 """
 
 from __future__ import annotations
 
-import contextlib
 import json
 import os
-import tempfile
-from collections.abc import Callable
 from dataclasses import asdict
 from pathlib import Path
 from typing import Any, Final
@@ -29,38 +26,19 @@ from typing import Any, Final
 import numpy as np
 import xarray as xr
 
+from bayescal.atomic import atomic_write_path
 from bayescal.calibration.posterior import LAMBDA_NAMES, Posterior
 from bayescal.design import prior_from_spec
 from bayescal.emulator.assemble import OutputStack
 from bayescal.emulator.basis import Basis, InputPCA, Normaliser, SeriesPCA, Standardisation
 from bayescal.emulator.gp import ConditionalPieces, Emulator, HyperPriors
 from bayescal.errors import DataError
-from bayescal.io import TEMP_SUFFIX, fsync_directory
 
 __all__ = ["load_emulator", "load_posterior", "save_emulator", "save_posterior"]
 
 EMULATOR_FORMAT = "bayescal-emulator/1"
 POSTERIOR_FORMAT = "bayescal-posterior/1"
 ENGINE: Final = "h5netcdf"
-
-
-def _atomic_netcdf(path: str | os.PathLike[str], write: Callable[[Path], None]) -> Path:
-    """Write through ``write(temp_path)`` then rename onto ``path`` (same folder)."""
-    final = Path(path)
-    final.parent.mkdir(parents=True, exist_ok=True)
-    fd, temp_name = tempfile.mkstemp(prefix=f".{final.name}.", suffix=TEMP_SUFFIX, dir=final.parent)
-    os.close(fd)
-    try:
-        write(Path(temp_name))
-        with open(temp_name, "rb") as stream:
-            os.fsync(stream.fileno())
-        os.replace(temp_name, final)
-    except BaseException:
-        with contextlib.suppress(FileNotFoundError):
-            os.unlink(temp_name)
-        raise
-    fsync_directory(final.parent)
-    return final
 
 
 def _input_pca_vars(inputs: InputPCA) -> dict[str, tuple[tuple[str, ...], np.ndarray]]:
@@ -143,7 +121,7 @@ def save_emulator(emulator: Emulator, path: str | os.PathLike[str], config_hash:
     def write(temp: Path) -> None:
         ds.to_netcdf(os.fspath(temp), engine=ENGINE)
 
-    return _atomic_netcdf(path, write)
+    return atomic_write_path(path, write)
 
 
 def _read(path: str | os.PathLike[str], group: str | None = None) -> xr.Dataset:
@@ -274,7 +252,7 @@ def save_posterior(
     def write(temp: Path) -> None:
         idata.to_netcdf(os.fspath(temp), engine=ENGINE)
 
-    return _atomic_netcdf(path, write)
+    return atomic_write_path(path, write)
 
 
 def load_posterior(path: str | os.PathLike[str]) -> Posterior:

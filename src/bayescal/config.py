@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import difflib
 import hashlib
-import importlib.util
 import json
 import os
 import tomllib
@@ -62,6 +61,7 @@ from bayescal.data.align import format_duration, parse_duration, parse_time_zone
 from bayescal.data.measured import column_problems
 from bayescal.errors import ConfigError
 from bayescal.glossary import GLOSSARY
+from bayescal.optional import module_installed
 from bayescal.units import same_scale
 
 __all__ = [  # the [simulator] sections are re-exported from bayescal.config_simulators
@@ -794,14 +794,6 @@ def _period_problems(study: Study) -> list[str]:
 
 #: Warm-up iterations NUTS needs at least (its window adaptation fails on fewer).
 NUTS_MIN_WARMUP = 20
-
-
-def module_installed(module: str) -> bool:
-    """Whether ``module`` can be imported, without importing it."""
-    try:
-        return importlib.util.find_spec(module) is not None
-    except (ImportError, ValueError):
-        return False
 
 
 def _sampler_problems(study: Study) -> list[str]:

@@ -23,7 +23,7 @@ from __future__ import annotations
 import csv
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, ClassVar, Literal
 
@@ -31,8 +31,8 @@ import numpy as np
 from scipy import special
 from scipy.stats import qmc
 
+from bayescal.atomic import atomic_write_json, atomic_write_text, read_json
 from bayescal.errors import ConfigError
-from bayescal.io import atomic_write_json, atomic_write_text, read_json
 
 __all__ = [
     "BetaPrior",
@@ -68,10 +68,18 @@ class Prior:
         Lower bound, in the parameter's unit.
     upper
         Upper bound, in the parameter's unit; must exceed ``lower``.
+    unit
+        The parameter's unit as the study file writes it (``"W/(m·K)"``), for
+        artefacts, tables and reports; ``""`` where unknown. Keyword only.
+    description
+        What the parameter is, in words (``"conductivity of the blocks"``).
+        Keyword only.
     """
 
     lower: float
     upper: float
+    unit: str = field(default="", kw_only=True)
+    description: str = field(default="", kw_only=True)
     distribution: ClassVar[str] = "base"
 
     def __post_init__(self) -> None:
@@ -114,8 +122,21 @@ class Prior:
         raise NotImplementedError
 
     def spec(self) -> dict[str, Any]:
-        """The prior as a plain dictionary (the study file's ``{distribution, ...}``)."""
-        return {"distribution": self.distribution, "lower": self.lower, "upper": self.upper}
+        """The prior as a plain dictionary (the study file's ``{distribution, ...}``).
+
+        ``unit`` and ``description`` are included where set;
+        :func:`prior_from_spec` reads the dictionary back.
+        """
+        out: dict[str, Any] = {
+            "distribution": self.distribution,
+            "lower": self.lower,
+            "upper": self.upper,
+        }
+        if self.unit:
+            out["unit"] = self.unit
+        if self.description:
+            out["description"] = self.description
+        return out
 
 
 @dataclass(frozen=True)
@@ -193,6 +214,9 @@ def prior_from_spec(
     upper: float,
     a: float | None = None,
     b: float | None = None,
+    *,
+    unit: str = "",
+    description: str = "",
 ) -> Prior:
     """Build a prior from the study file's fields.
 
@@ -204,6 +228,8 @@ def prior_from_spec(
         Bounds, in the parameter's unit.
     a, b
         Beta shape parameters (required for ``"beta"``, refused for ``"uniform"``). [-]
+    unit, description
+        The parameter's unit and description (see :class:`Prior`).
 
     Returns
     -------
@@ -216,14 +242,14 @@ def prior_from_spec(
                 f"a uniform prior takes no shape parameters, got a={a!r}, b={b!r}",
                 hint='remove a and b, or set distribution = "beta"',
             )
-        return UniformPrior(lower, upper)
+        return UniformPrior(lower, upper, unit=unit, description=description)
     if distribution == "beta":
         if a is None or b is None:
             raise ConfigError(
                 f"a beta prior needs both shape parameters, got a={a!r}, b={b!r}",
                 hint="set a and b (> 0); a = b = 1 is uniform",
             )
-        return BetaPrior(lower, upper, a, b)
+        return BetaPrior(lower, upper, a, b, unit=unit, description=description)
     raise ConfigError(f"unknown prior distribution {distribution!r}; expected 'uniform' or 'beta'")
 
 

@@ -59,8 +59,8 @@ from typing import TYPE_CHECKING, Any, Literal
 import numpy as np
 
 from bayescal import __version__, workers
+from bayescal.atomic import atomic_write_json, atomic_write_npz, read_npz
 from bayescal.errors import ConfigError, SimulatorError
-from bayescal.io import atomic_write_json, atomic_write_npz, read_npz
 from bayescal.simulators.base import Forcing, Simulator
 from bayescal.workers import qualname
 

@@ -13,10 +13,10 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from bayescal.atomic import atomic_write_text
 from bayescal.config import Study
 from bayescal.data.measured import MeasuredData, load_measured
 from bayescal.errors import ConfigError
-from bayescal.io import atomic_write_text
 from bayescal.metrics import Metrics, fit_metrics
 from bayescal.simulators.factory import build_simulator, nominal_parameters
 

@@ -24,7 +24,7 @@ from typing import Any
 
 import numpy as np
 
-from bayescal.io import atomic_write_npz
+from bayescal.atomic import atomic_write_npz
 
 __all__ = ["ChainCheckpoint"]
 

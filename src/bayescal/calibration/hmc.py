@@ -50,12 +50,12 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import special
 
-from bayescal.config import module_installed
 from bayescal.design import BetaPrior, Prior, UniformPrior
 from bayescal.emulator.dense import GridData
 from bayescal.emulator.kernel import LOG_2PI, FloatArray
 from bayescal.emulator.kron import SymEig
 from bayescal.errors import ConfigError
+from bayescal.optional import module_installed
 
 if TYPE_CHECKING:
     from bayescal.calibration.posterior import CalibrationPosterior

@@ -6,7 +6,7 @@ holds the estimate ``delta`` (physical units), the standardisation, the GP of
 predicts bit for bit what the saved one did), the theta* draws of the phase
 (normalised, with ``lambda``, ``lambda*``, log density and acceptance) and, in
 the attributes, names, priors, seeds and settings. The write goes through
-:func:`bayescal.artefacts._atomic_netcdf` (temporary file, fsync, rename).
+:func:`bayescal.atomic.atomic_write_path` (temporary file, fsync, rename).
 """
 
 from __future__ import annotations
@@ -19,7 +19,8 @@ from typing import Any
 import numpy as np
 import xarray as xr
 
-from bayescal.artefacts import ENGINE, _atomic_netcdf, _check_format, _outputs, _read
+from bayescal.artefacts import ENGINE, _check_format, _outputs, _read
+from bayescal.atomic import atomic_write_path
 from bayescal.calibration.posterior import Posterior
 from bayescal.design import prior_from_spec
 from bayescal.discrepancy.delta_gp import DeltaGP
@@ -102,7 +103,7 @@ def save_discrepancy(
     def write(temp: Path) -> None:
         ds.to_netcdf(os.fspath(temp), engine=ENGINE)
 
-    return _atomic_netcdf(path, write)
+    return atomic_write_path(path, write)
 
 
 def load_discrepancy(path: str | os.PathLike[str]) -> Discrepancy:

@@ -128,7 +128,11 @@ def default_priors(
             at_lower = (side == "lower") == (pile_up == "toward")
             a, b = (1.0, 2.0) if at_lower else (2.0, 1.0)
         if a == 1.0 and b == 1.0:
-            out[name] = UniformPrior(prior.lower, prior.upper)
+            out[name] = UniformPrior(
+                prior.lower, prior.upper, unit=prior.unit, description=prior.description
+            )
         else:
-            out[name] = BetaPrior(prior.lower, prior.upper, a, b)
+            out[name] = BetaPrior(
+                prior.lower, prior.upper, a, b, unit=prior.unit, description=prior.description
+            )
     return out

@@ -40,12 +40,7 @@ import pandas as pd
 import xarray as xr
 
 from bayescal.artefacts import load_emulator, load_posterior, save_emulator, save_posterior
-from bayescal.calibration.posterior import Posterior
-from bayescal.config import Study
-from bayescal.design import Design
-from bayescal.emulator.gp import LooResult
-from bayescal.errors import ConfigError
-from bayescal.io import (
+from bayescal.atomic import (
     atomic_write,
     atomic_write_json,
     atomic_write_npz,
@@ -53,6 +48,11 @@ from bayescal.io import (
     read_json,
     read_npz,
 )
+from bayescal.calibration.posterior import Posterior
+from bayescal.config import Study
+from bayescal.design import Design
+from bayescal.emulator.gp import LooResult
+from bayescal.errors import ConfigError
 from bayescal.pipeline.stages import (
     Context,
     EmulatorResult,

@@ -126,7 +126,15 @@ def study_priors(study: Study) -> dict[str, Prior]:
     for name, p in study.parameters.items():
         spec = p.prior
         a, b = getattr(spec, "a", None), getattr(spec, "b", None)
-        out[name] = prior_from_spec(spec.distribution, spec.lower, spec.upper, a, b)
+        out[name] = prior_from_spec(
+            spec.distribution,
+            spec.lower,
+            spec.upper,
+            a,
+            b,
+            unit=p.unit,
+            description=p.description,
+        )
     return out
 
 

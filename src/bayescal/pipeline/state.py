@@ -22,7 +22,7 @@ from typing import Any
 
 import numpy as np
 
-from bayescal.io import atomic_write_json, read_json
+from bayescal.atomic import atomic_write_json, read_json
 
 __all__ = ["STAGES", "StageLog", "derived_seed", "digest", "file_logger"]
 

@@ -1,7 +1,7 @@
 """Figures of the calibration report (matplotlib, Agg backend, PNG written atomically).
 
 Every function takes arrays or result objects and a file path, writes one PNG
-through :func:`bayescal.io.atomic_write` and returns the path, so each can be
+through :func:`bayescal.atomic.atomic_write` and returns the path, so each can be
 used on its own. The figures follow the paper (``calibration-framework.md``):
 
 * :func:`plot_posterior_histograms` -- theta* over its prior density (Figures 1-3, 6-9);
@@ -34,8 +34,8 @@ from matplotlib.figure import Figure
 from numpy.typing import ArrayLike, NDArray
 from scipy import stats
 
+from bayescal.atomic import atomic_write
 from bayescal.glossary import GLOSSARY
-from bayescal.io import atomic_write
 
 if TYPE_CHECKING:
     from bayescal.calibration.posterior import Posterior

@@ -28,11 +28,11 @@ import pandas as pd
 import xarray as xr
 
 from bayescal import __version__
+from bayescal.atomic import atomic_write_text
 from bayescal.calibration.posterior import Posterior
 from bayescal.design import Design
 from bayescal.emulator.gp import Emulator, LooResult
 from bayescal.glossary import GLOSSARY
-from bayescal.io import atomic_write_text
 from bayescal.report import figures as fg
 from bayescal.runner import RunFailure
 

@@ -12,8 +12,8 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
+from bayescal.atomic import atomic_write
 from bayescal.glossary import GLOSSARY
-from bayescal.io import atomic_write
 
 
 def _label(name: str) -> str:

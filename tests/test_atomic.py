@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from bayescal import io
+from bayescal import atomic as io
 
 
 def _leftovers(folder: Path) -> list[str]:
@@ -89,7 +89,7 @@ def test_process_killed_before_rename_leaves_no_partial_file(tmp_path: Path) -> 
         f"""
         import os
         import numpy as np
-        from bayescal import io
+        from bayescal import atomic as io
         os.replace = lambda *args: os._exit(9)
         io.atomic_write_npz({str(target)!r}, {{"x": np.arange(10_000.0)}})
         """
@@ -110,3 +110,30 @@ def test_atomic_files_get_the_usual_permissions(tmp_path: Path) -> None:
     finally:
         os.umask(old)
     assert stat.S_IMODE(path.stat().st_mode) == 0o644
+
+
+def test_files_written_by_name_get_the_usual_permissions(tmp_path: Path) -> None:
+    # netCDF libraries open (or recreate) the file by name; the mode must not stay 0600.
+    def recreate(temp: Path) -> None:
+        temp.unlink()
+        temp.write_bytes(b"CDF")
+        os.chmod(temp, 0o600)
+
+    old = os.umask(0o022)
+    try:
+        path = io.atomic_write_path(tmp_path / "posterior.nc", recreate)
+    finally:
+        os.umask(old)
+    assert stat.S_IMODE(path.stat().st_mode) == 0o644
+    assert path.read_bytes() == b"CDF"
+    assert _leftovers(tmp_path) == []
+
+
+def test_failed_write_by_name_leaves_no_temp(tmp_path: Path) -> None:
+    def fail(temp: Path) -> None:
+        temp.write_bytes(b"half")
+        raise OSError("disk full")
+
+    with pytest.raises(OSError, match="disk full"):
+        io.atomic_write_path(tmp_path / "emulator.nc", fail)
+    assert list(tmp_path.iterdir()) == []

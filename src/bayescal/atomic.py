@@ -1,7 +1,8 @@
 """Atomic file writing: a file either holds its complete new content or is untouched.
 
-Every artefact bayescal writes (cached simulator runs, failure records, the
-design, fitted emulators, posteriors) goes through these helpers so that a
+This is bayescal's one file writer. Every file bayescal writes (cached
+simulator runs, failure records, MCMC checkpoints, the design, fitted
+emulators, posteriors, reports) goes through these helpers so that a
 crash, a ``kill -9`` or a full disk never leaves a half-written file under
 the final name, and a resumed study can trust every file it finds.
 
@@ -21,6 +22,11 @@ atomic on one volume):
 
 If anything fails before step 3 the temporary file is removed and the
 exception propagates; the final name keeps its previous content, if any.
+
+The new file gets the permissions a plain ``open()`` would give it (``0666``
+less the umask), not the ``0600`` of :func:`tempfile.mkstemp`. Libraries that
+write by file name (netCDF through h5netcdf) use :func:`atomic_write_path`,
+which follows the same recipe with a temporary *name* instead of a stream.
 """
 
 from __future__ import annotations
@@ -41,6 +47,7 @@ __all__ = [
     "atomic_write_bytes",
     "atomic_write_json",
     "atomic_write_npz",
+    "atomic_write_path",
     "atomic_write_text",
     "fsync_directory",
     "read_json",
@@ -77,6 +84,26 @@ def _umask() -> int:
     return mask
 
 
+def _temporary(final: Path) -> tuple[int, str]:
+    """A hidden temporary file beside ``final`` with the umask's permissions."""
+    final.parent.mkdir(parents=True, exist_ok=True)
+    fd, temp_name = tempfile.mkstemp(prefix=f".{final.name}.", suffix=TEMP_SUFFIX, dir=final.parent)
+    try:
+        # mkstemp creates the file 0600; give it the mode a plain open() would (umask).
+        os.fchmod(fd, 0o666 & ~_umask())
+    except BaseException:
+        os.close(fd)
+        os.unlink(temp_name)
+        raise
+    return fd, temp_name
+
+
+def _commit(temp_name: str, final: Path) -> Path:
+    os.replace(temp_name, final)
+    fsync_directory(final.parent)
+    return final
+
+
 def atomic_write(path: str | os.PathLike[str], write: Callable[[IO[bytes]], None]) -> Path:
     """Write a file atomically through a callback that writes to a binary stream.
 
@@ -93,22 +120,52 @@ def atomic_write(path: str | os.PathLike[str], write: Callable[[IO[bytes]], None
         The final path.
     """
     final = Path(path)
-    final.parent.mkdir(parents=True, exist_ok=True)
-    fd, temp_name = tempfile.mkstemp(prefix=f".{final.name}.", suffix=TEMP_SUFFIX, dir=final.parent)
+    fd, temp_name = _temporary(final)
     try:
-        # mkstemp creates the file 0600; give it the mode a plain open() would (umask).
-        os.fchmod(fd, 0o666 & ~_umask())
         with os.fdopen(fd, "wb") as stream:
             write(stream)
             stream.flush()
             os.fsync(stream.fileno())
-        os.replace(temp_name, final)
     except BaseException:
         with contextlib.suppress(FileNotFoundError):
             os.unlink(temp_name)
         raise
-    fsync_directory(final.parent)
-    return final
+    return _commit(temp_name, final)
+
+
+def atomic_write_path(path: str | os.PathLike[str], write: Callable[[Path], None]) -> Path:
+    """Write a file atomically through a callback that writes to a file *name*.
+
+    For libraries that open the file themselves (``xarray.Dataset.to_netcdf``,
+    ``arviz.InferenceData.to_netcdf``). The callback gets the temporary file's
+    path (it exists, empty, with the final permissions) and may replace it.
+
+    Parameters
+    ----------
+    path
+        Final file name. Its folder is created if missing.
+    write
+        Called once with the temporary path; writes the whole content there.
+
+    Returns
+    -------
+    pathlib.Path
+        The final path.
+    """
+    final = Path(path)
+    fd, temp_name = _temporary(final)
+    os.close(fd)
+    try:
+        mode = os.stat(temp_name).st_mode
+        write(Path(temp_name))
+        os.chmod(temp_name, mode)  # a library that recreated the file gets the mode back
+        with open(temp_name, "rb") as stream:
+            os.fsync(stream.fileno())
+    except BaseException:
+        with contextlib.suppress(FileNotFoundError):
+            os.unlink(temp_name)
+        raise
+    return _commit(temp_name, final)
 
 
 def atomic_write_bytes(path: str | os.PathLike[str], data: bytes) -> Path:
