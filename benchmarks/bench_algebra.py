@@ -32,9 +32,9 @@ from dataclasses import dataclass  # noqa: E402
 import numpy as np  # noqa: E402
 from scipy import linalg  # noqa: E402
 
-from bayescal.emulator.dense import DenseCalibrationDensity  # noqa: E402
+from bayescal.calibration.dense import DenseCalibrationDensity  # noqa: E402
+from bayescal.calibration.kron import KronCalibrationDensity  # noqa: E402
 from bayescal.emulator.kernel import SeparableKernel  # noqa: E402
-from bayescal.emulator.kron import KronCalibrationDensity  # noqa: E402
 
 
 @dataclass(frozen=True)

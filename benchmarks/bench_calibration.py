@@ -34,10 +34,12 @@ import numpy as np  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 
-from bayescal.calibration.posterior import CalibrationPosterior, calibrate  # noqa: E402
+from bayescal.calibration.kron import Kind, make_algebra  # noqa: E402
+from bayescal.calibration.posterior import calibrate  # noqa: E402
+from bayescal.calibration.target import CalibrationPosterior  # noqa: E402
 from bayescal.emulator.assemble import Assembled, assemble  # noqa: E402
-from bayescal.emulator.gp import Emulator, train  # noqa: E402
-from bayescal.emulator.kron import Kind, make_algebra  # noqa: E402
+from bayescal.emulator.gp import Emulator  # noqa: E402
+from bayescal.emulator.training import train  # noqa: E402
 from virtual_wall import virtual_experiment  # noqa: E402
 
 

@@ -62,12 +62,12 @@ from typing import Any  # noqa: E402
 import numpy as np  # noqa: E402
 from scipy import linalg  # noqa: E402
 
-from bayescal.calibration.posterior import CalibrationPosterior  # noqa: E402
+from bayescal.calibration.kron import KronCalibrationDensity  # noqa: E402
+from bayescal.calibration.target import CalibrationPosterior  # noqa: E402
 from bayescal.design import UniformPrior  # noqa: E402
 from bayescal.emulator import kron  # noqa: E402
-from bayescal.emulator.gp import TrainingPosterior  # noqa: E402
 from bayescal.emulator.kernel import SeparableKernel  # noqa: E402
-from bayescal.emulator.kron import KronCalibrationDensity  # noqa: E402
+from bayescal.emulator.training import TrainingPosterior  # noqa: E402
 
 LAM, LAM_STAR = 1e3, 50.0
 
@@ -410,10 +410,10 @@ def training(case: Case, pb: Problem, rng: np.random.Generator) -> tuple[float, 
 def profile_mcmc(top: int) -> None:
     """cProfile of one emulator training and one calibration MCMC (virtual wall, 30x25)."""
     sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
-    from bayescal.calibration.diagnostics import _arviz
     from bayescal.calibration.posterior import calibrate
     from bayescal.emulator.assemble import assemble
-    from bayescal.emulator.gp import train
+    from bayescal.emulator.training import train
+    from bayescal.mcmc.diagnostics import import_arviz
     from virtual_wall import virtual_experiment
 
     ve = virtual_experiment(seed=0, runs=30, periods=25)
@@ -433,7 +433,7 @@ def profile_mcmc(top: int) -> None:
     def cal() -> object:
         return calibrate(em, a, n_chains=4, n_burn=500, n_draws=500, seed=3, backend="serial")
 
-    _arviz()  # imported once per process in real use; keep the import out of the profile
+    import_arviz()  # imported once per process in real use; keep the import out of the profile
 
     prof = cProfile.Profile()
     start = time.perf_counter()

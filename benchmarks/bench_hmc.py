@@ -51,16 +51,13 @@ import numpy as np  # noqa: E402
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 
 from bayescal.calibration import hmc  # noqa: E402
-from bayescal.calibration.diagnostics import diagnose  # noqa: E402
-from bayescal.calibration.posterior import (  # noqa: E402
-    LAMBDA_NAMES,
-    CalibrationPosterior,
-    _starts,  # the starting points calibrate() uses
-    calibrate,
-)
+from bayescal.calibration.kron import make_algebra  # noqa: E402
+from bayescal.calibration.posterior import calibrate  # noqa: E402
+from bayescal.calibration.target import LAMBDA_NAMES, CalibrationPosterior, default_starts  # noqa: E402
 from bayescal.emulator.assemble import Assembled, assemble  # noqa: E402
-from bayescal.emulator.gp import Emulator, train  # noqa: E402
-from bayescal.emulator.kron import make_algebra  # noqa: E402
+from bayescal.emulator.gp import Emulator  # noqa: E402
+from bayescal.emulator.training import train  # noqa: E402
+from bayescal.mcmc.diagnostics import diagnose  # noqa: E402
 from virtual_wall import virtual_experiment  # noqa: E402
 
 
@@ -124,14 +121,14 @@ def run_mwg(
 
 
 def run_nuts(
-    em: Emulator, a: Assembled, burn: int, draws: int, seed: int, vectorized: bool = False
+    em: Emulator, a: Assembled, burn: int, draws: int, seed: int, vectorised: bool = False
 ) -> Run:
     """What calibrate(..., sampler="nuts") runs: sample_nuts in a spawned process."""
     wall, cpu, child = time.perf_counter(), time.process_time(), children_cpu_seconds()
     alg = make_algebra("kronecker", em.theta, em.x, em.kernels, em.basis.ktk, em.w, a.w_star)
     target = CalibrationPosterior(alg, list(a.priors.values()), em.lam_prior, a.lam_star_prior)
-    starts = _starts(target, 4, np.random.default_rng([seed, 2]))
-    res = hmc.sample_nuts_isolated(target, starts, burn, draws, seed, vectorized=vectorized)
+    starts = default_starts(target, 4, seed)
+    res = hmc.sample_nuts_isolated(target, starts, burn, draws, seed, vectorised=vectorised)
     t = target.t
     phys = np.stack([p.from_unit(res.draws[..., k]) for k, p in enumerate(a.priors.values())], -1)
     everything = np.concatenate([phys, res.draws[..., t:]], axis=-1)
@@ -147,7 +144,7 @@ def run_nuts(
         f" / {ch.cpu_seconds - ch.compile_cpu_seconds:.2f} s; process start-up, import and "
         f"diagnostics {wall - ch.seconds:.2f} s wall"
     )
-    name = "nuts-vmap" if vectorized else "nuts"
+    name = "nuts-vmap" if vectorised else "nuts"
     return Run(
         name,
         wall,
@@ -244,7 +241,7 @@ def main() -> None:
         ]
         if opts.variants:
             jobs += [(run_mwg, mwg_len, {"backend": "processes"})]
-            jobs += [(run_nuts, nuts_len, {"vectorized": True})]
+            jobs += [(run_nuts, nuts_len, {"vectorised": True})]
         for fn, lengths, kw in jobs if rep % 2 == 0 else jobs[::-1]:
             runs.append(fn(em, a, *lengths, seed=rep + 3, **kw))
             _show(runs[-1], a.parameter_names)

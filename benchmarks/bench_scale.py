@@ -49,7 +49,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 from bayescal.calibration.posterior import calibrate  # noqa: E402
 from bayescal.config import EmulatorSection  # noqa: E402
 from bayescal.emulator.assemble import assemble  # noqa: E402
-from bayescal.emulator.gp import train  # noqa: E402
+from bayescal.emulator.training import train  # noqa: E402
 from virtual_wall import virtual_experiment  # noqa: E402
 
 _EMULATOR_DEFAULTS = EmulatorSection()

@@ -39,20 +39,15 @@ import time  # noqa: E402
 from dataclasses import dataclass  # noqa: E402
 from pathlib import Path  # noqa: E402
 
-import numpy as np  # noqa: E402
-
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 
-from bayescal.calibration.chains import run_chains  # noqa: E402
-from bayescal.calibration.diagnostics import _arviz  # noqa: E402
-from bayescal.calibration.posterior import (  # noqa: E402
-    CalibrationPosterior,
-    _sampler,
-    _starts,
-)
+from bayescal.calibration.kron import make_algebra  # noqa: E402
+from bayescal.calibration.target import CalibrationPosterior, default_sampler, default_starts  # noqa: E402
 from bayescal.emulator.assemble import Assembled, assemble  # noqa: E402
-from bayescal.emulator.gp import Emulator, train  # noqa: E402
-from bayescal.emulator.kron import make_algebra  # noqa: E402
+from bayescal.emulator.gp import Emulator  # noqa: E402
+from bayescal.emulator.training import train  # noqa: E402
+from bayescal.mcmc.chains import run_chains  # noqa: E402
+from bayescal.mcmc.diagnostics import import_arviz  # noqa: E402
 from virtual_wall import virtual_experiment  # noqa: E402
 
 
@@ -99,16 +94,16 @@ def run_one(
     post = target(em, a)
     start = time.perf_counter()
     chains = run_chains(
-        _sampler("mwg", post, n_burn),
+        default_sampler(post, n_burn),
         post,
-        _starts(post, cfg.n_chains, np.random.default_rng([3, 2])),
+        default_starts(post, cfg.n_chains, 3),
         n_draws,
         seed=3,
         backend=cfg.backend,  # type: ignore[arg-type]
         max_workers=2,
     )
     took = time.perf_counter() - start
-    az = _arviz()
+    az = import_arviz()
     values = [float(az.ess(chains.draws[:, :, k], method="bulk")) for k in range(post.t)]
     return took, min(values)
 

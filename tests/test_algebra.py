@@ -19,19 +19,11 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy import stats
 
-from bayescal.emulator.dense import (
-    DenseCalibrationDensity,
-    calibration_covariance,
-    dense_logpdf,
-    dense_training_logpdf,
-)
+from bayescal.calibration.dense import DenseCalibrationDensity
+from bayescal.calibration.kron import KronCalibrationDensity, make_algebra
+from bayescal.emulator.dense import calibration_covariance, dense_logpdf, dense_training_logpdf
 from bayescal.emulator.kernel import LogDensity, SeparableKernel
-from bayescal.emulator.kron import (
-    KronCalibrationDensity,
-    kron_training_logpdf,
-    make_algebra,
-    training_logpdf,
-)
+from bayescal.emulator.kron import kron_training_logpdf, training_logpdf
 
 RTOL = 1e-9  # see the module docstring
 FIELDS = ("logpdf", "logdet", "quad")

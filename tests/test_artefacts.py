@@ -13,7 +13,8 @@ import xarray as xr
 from bayescal.artefacts import load_emulator, load_posterior, save_emulator, save_posterior
 from bayescal.calibration.posterior import Posterior, calibrate
 from bayescal.emulator.assemble import Assembled, assemble
-from bayescal.emulator.gp import Emulator, train
+from bayescal.emulator.gp import Emulator
+from bayescal.emulator.training import train
 from bayescal.errors import DataError
 from virtual_wall import virtual_experiment
 

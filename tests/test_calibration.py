@@ -2,14 +2,19 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from pathlib import Path
+
 import numpy as np
 import pytest
 
-from bayescal.calibration.posterior import CalibrationPosterior, Posterior, calibrate
+from bayescal.calibration.kron import make_algebra
+from bayescal.calibration.posterior import Posterior, calibrate
+from bayescal.calibration.target import CalibrationPosterior
 from bayescal.design import BetaPrior, UniformPrior
 from bayescal.emulator.assemble import Assembled, assemble
-from bayescal.emulator.gp import Emulator, train
-from bayescal.emulator.kron import make_algebra
+from bayescal.emulator.gp import Emulator
+from bayescal.emulator.training import train
 from bayescal.errors import ConfigError
 from virtual_wall import PRIORS, VirtualExperiment, random_truth, virtual_experiment
 
@@ -56,8 +61,20 @@ def test_kronecker_and_dense_log_posteriors_agree(small: tuple[Assembled, Emulat
     assert targets[0](outside) == -np.inf
 
 
+class Stop(Exception):
+    """Stands for a kill, raised from the progress callback."""
+
+
+def _stop_after(iterations: int) -> Callable[[int], None]:
+    def callback(done: int) -> None:
+        if done >= iterations:
+            raise Stop
+
+    return callback
+
+
 def test_serial_processes_and_vectorised_give_the_same_draws(
-    small: tuple[Assembled, Emulator],
+    small: tuple[Assembled, Emulator], tmp_path: Path
 ) -> None:
     a, em = small
     runs = [
@@ -70,9 +87,15 @@ def test_serial_processes_and_vectorised_give_the_same_draws(
     np.testing.assert_array_equal(runs[0].draws, runs[2].draws)
     np.testing.assert_allclose(runs[0].log_density, runs[2].log_density, rtol=1e-12)
     assert runs[0].draws.shape == (4, 20, 3)
-    with pytest.raises(ConfigError, match="does not write checkpoints"):
-        calibrate(em, a, n_chains=4, n_burn=5, n_draws=5, backend="vectorised",
-                  checkpoint_dir=".")  # fmt: skip
+    # Lockstep chains checkpoint too: killed after 37 of 50 sweeps (a snapshot after
+    # the first batch of 25), they resume to the same draws.
+    common = dict(n_chains=4, n_burn=30, n_draws=20, seed=9, backend="vectorised")
+    with pytest.raises(Stop):
+        calibrate(em, a, **common, checkpoint_dir=tmp_path, checkpoint_seconds=0.0,  # type: ignore[arg-type]
+                  callback=_stop_after(4 * 37))  # fmt: skip
+    assert (tmp_path / "lockstep.npz").is_file()
+    resumed = calibrate(em, a, **common, checkpoint_dir=tmp_path, checkpoint_seconds=0.0)  # type: ignore[arg-type]
+    np.testing.assert_array_equal(resumed.draws, runs[2].draws)
 
 
 def test_short_chains_are_flagged(small: tuple[Assembled, Emulator]) -> None:

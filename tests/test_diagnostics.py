@@ -17,7 +17,8 @@ import pytest
 from numpy.typing import NDArray
 from scipy import stats
 
-from bayescal.calibration import (
+from bayescal.errors import ConfigError
+from bayescal.mcmc import (
     AdaptiveMetropolis,
     Diagnostics,
     MetropolisWithinGibbs,
@@ -25,7 +26,6 @@ from bayescal.calibration import (
     run_chains,
     to_inference_data,
 )
-from bayescal.errors import ConfigError
 
 
 def import_arviz() -> Any:
@@ -180,7 +180,7 @@ def test_bad_input_raises_config_error() -> None:
 def test_sampled_chains_end_to_end(sampler: Any) -> None:
     chains = run_chains(sampler, standard_normal_2d, np.array([[-2.0, 2.0], [2.0, -2.0],
                         [0.0, 3.0], [3.0, 0.0]]), 3000, seed=9, names=["u", "v"],
-                        parallel=False)  # fmt: skip
+                        backend="serial")  # fmt: skip
     result = diagnose(chains)
     assert result.ok, result.warnings
     assert result.acceptance is not None

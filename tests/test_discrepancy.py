@@ -10,6 +10,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from bayescal.calibration.kron import make_algebra
 from bayescal.calibration.posterior import Posterior, calibrate
 from bayescal.design import BetaPrior, UniformPrior
 from bayescal.discrepancy import (
@@ -24,8 +25,8 @@ from bayescal.discrepancy import (
 from bayescal.discrepancy.delta_gp import hard_threshold
 from bayescal.discrepancy.phase import DeltaPhase, empirical_moments, gls_observations
 from bayescal.emulator.assemble import Assembled, assemble
-from bayescal.emulator.gp import Emulator, train
-from bayescal.emulator.kron import make_algebra
+from bayescal.emulator.gp import Emulator
+from bayescal.emulator.training import train
 from bayescal.errors import ConfigError
 from virtual_wall import NOISE_VARIANCE, PER_DAY, VirtualExperiment, virtual_experiment
 

@@ -12,8 +12,10 @@ from scipy import integrate, stats
 
 from bayescal.emulator.assemble import Assembled, assemble
 from bayescal.emulator.dense import dense_training_logpdf
-from bayescal.emulator.gp import Emulator, HyperLayout, TrainingPosterior, _log_prior_beta, train
+from bayescal.emulator.gp import Emulator
+from bayescal.emulator.hyper import HyperLayout, log_prior_beta
 from bayescal.emulator.kernel import SeparableKernel
+from bayescal.emulator.training import TrainingPosterior, train
 from bayescal.errors import DataError
 from virtual_wall import VirtualExperiment, random_truth, simulate, virtual_experiment
 
@@ -79,12 +81,12 @@ def test_beta_prior_is_the_beta_prior_of_rho_transformed() -> None:
     # P(beta < b) = P(rho > exp(-b/4)) under rho ~ Beta(1, 0.1).
     for b0 in (1e-3, 0.5, 4.0):
         mass, _ = integrate.quad(
-            lambda b: math.exp(_log_prior_beta(np.array([b]), 1.0, 0.1)), 0.0, b0, limit=200
+            lambda b: math.exp(log_prior_beta(np.array([b]), 1.0, 0.1)), 0.0, b0, limit=200
         )
         expected = stats.beta.sf(math.exp(-b0 / 4.0), 1.0, 0.1)
         # quad on an integrable b^-0.9 singularity: ~1e-6 relative accuracy.
         assert mass == pytest.approx(expected, rel=1e-5)
-    assert _log_prior_beta(np.array([0.0]), 1.0, 0.1) == -math.inf
+    assert log_prior_beta(np.array([0.0]), 1.0, 0.1) == -math.inf
 
 
 @pytest.fixture(scope="module")

@@ -17,17 +17,21 @@ import pytest
 
 from bayescal import config
 from bayescal.calibration import hmc
-from bayescal.calibration.posterior import CalibrationPosterior, Posterior, calibrate
+from bayescal.calibration.kron import make_algebra
+from bayescal.calibration.posterior import Posterior, calibrate
+from bayescal.calibration.target import CalibrationPosterior
 from bayescal.config import CalibrationSection, study_from_dict
 from bayescal.design import BetaPrior
 from bayescal.emulator.assemble import Assembled, assemble
-from bayescal.emulator.gp import Emulator, train
-from bayescal.emulator.kron import make_algebra
+from bayescal.emulator.gp import Emulator
+from bayescal.emulator.training import train
 from bayescal.errors import ConfigError
+from bayescal.mcmc import nuts
+from bayescal.optional import module_installed
 from bayescal.pipeline import stages
 from virtual_wall import VirtualExperiment, virtual_experiment
 
-HAS_JAX = all(config.module_installed(m) for m in ("jax", "blackjax"))
+HAS_JAX = all(module_installed(m) for m in ("jax", "blackjax"))
 needs_jax = pytest.mark.skipif(not HAS_JAX, reason="the extra bayescal[hmc] is not installed")
 FIXTURE = Path(__file__).resolve().parent / "data" / "wall-study"
 BASE = tomllib.loads((FIXTURE / "study.toml").read_text(encoding="utf-8"))
@@ -89,7 +93,7 @@ def _jax_side(targets: list[CalibrationPosterior], points: np.ndarray) -> dict[s
     jax = _jax()
     out: dict[str, Any] = {}
     for b, target in enumerate(targets):
-        con, unc = hmc.jax_log_posterior(hmc.fixed_arrays(target))
+        con, unc = hmc.jax_log_posterior(hmc.jax_arrays(target.grid(), target.prior_terms))
         f_v, f_z = jax.jit(con), jax.jit(unc)
         z = hmc.to_unconstrained(points, 3)
         out[f"v{b}"] = np.array([float(f_v(v)) for v in points])
@@ -100,8 +104,9 @@ def _jax_side(targets: list[CalibrationPosterior], points: np.ndarray) -> dict[s
     return out
 
 
-def _gaussian_runs() -> tuple[hmc.NutsChains, hmc.NutsChains]:
-    """Two NUTS runs with one seed on a correlated Gaussian (in a spawned child)."""
+def _gaussian_runs() -> tuple[nuts.NutsChains, nuts.NutsChains, nuts.NutsChains, list[int]]:
+    """Two NUTS runs with one seed on a correlated Gaussian, and one with the chains
+    vmapped into one program (in a spawned child), with the vmapped run's progress."""
     jax = _jax()
     prec = jax.numpy.asarray(np.linalg.inv(GAUSS_CORR * np.outer(GAUSS_SD, GAUSS_SD)))
 
@@ -110,8 +115,11 @@ def _gaussian_runs() -> tuple[hmc.NutsChains, hmc.NutsChains]:
         return -0.5 * r @ prec @ r
 
     starts = np.random.default_rng(0).normal(size=(4, 3)) * 3.0
-    run = hmc.run_nuts(logdensity, starts, 400, 1000, seed=11)
-    return run, hmc.run_nuts(logdensity, starts, 400, 1000, seed=11)
+    run = nuts.run_nuts(logdensity, starts, 400, 1000, seed=11)
+    ticks: list[int] = []
+    vmapped = nuts.run_nuts(logdensity, starts, 400, 1000, seed=11, vectorised=True,
+                            callback=ticks.append)  # fmt: skip
+    return run, nuts.run_nuts(logdensity, starts, 400, 1000, seed=11), vmapped, ticks
 
 
 def _in_child(fn: Any, *args: Any) -> Any:
@@ -163,20 +171,24 @@ def test_gradient_matches_finite_differences(
 @needs_jax
 @pytest.mark.slow
 def test_nuts_recovers_a_correlated_gaussian() -> None:
-    run, again = _in_child(_gaussian_runs)
+    run, again, vmapped, ticks = _in_child(_gaussian_runs)
     np.testing.assert_array_equal(run.position, again.position)  # seeded: reproducible
-    flat = run.position.reshape(-1, 3)
-    ess = 1000.0  # conservative: NUTS gives ~1 effective draw per draw on a Gaussian
-    # Means within 4.5 Monte Carlo standard errors (sd / sqrt(ESS)): a false
-    # alarm has probability ~1e-5 per coordinate.
-    err = np.abs(flat.mean(axis=0) - GAUSS_MEAN)
-    np.testing.assert_array_less(err, 4.5 * GAUSS_SD / np.sqrt(ess))
-    # The SD's Monte Carlo error is ~sd / sqrt(2 ESS) = 2.2 % of it; allow 10 %.
-    np.testing.assert_allclose(flat.std(axis=0), GAUSS_SD, rtol=0.10)
-    # The correlation's standard error is ~(1 - r^2) / sqrt(ESS) <= 0.032; allow 0.1.
-    np.testing.assert_allclose(np.corrcoef(flat.T), GAUSS_CORR, atol=0.1)
-    assert run.divergent.sum() == 0
-    assert np.all((run.acceptance > 0.6) & (run.acceptance < 0.99))  # adapted towards 0.8
+    # The vmapped program (one compiled program for all chains) samples the same target.
+    for chains in (run, vmapped):
+        flat = chains.position.reshape(-1, 3)
+        ess = 1000.0  # conservative: NUTS gives ~1 effective draw per draw on a Gaussian
+        # Means within 4.5 Monte Carlo standard errors (sd / sqrt(ESS)): a false
+        # alarm has probability ~1e-5 per coordinate.
+        err = np.abs(flat.mean(axis=0) - GAUSS_MEAN)
+        np.testing.assert_array_less(err, 4.5 * GAUSS_SD / np.sqrt(ess))
+        # The SD's Monte Carlo error is ~sd / sqrt(2 ESS) = 2.2 % of it; allow 10 %.
+        np.testing.assert_allclose(flat.std(axis=0), GAUSS_SD, rtol=0.10)
+        # The correlation's standard error is ~(1 - r^2) / sqrt(ESS) <= 0.032; allow 0.1.
+        np.testing.assert_allclose(np.corrcoef(flat.T), GAUSS_CORR, atol=0.1)
+        assert chains.divergent.sum() == 0
+        assert np.all((chains.acceptance > 0.6) & (chains.acceptance < 0.99))  # towards 0.8
+    # vmapped progress: after the warm-up of all chains, then after each of the 10 chunks
+    assert ticks == [4 * 400 + 4 * 100 * k for k in range(11)]
 
 
 @dataclass(frozen=True)
@@ -208,8 +220,10 @@ def test_calibrate_with_nuts_returns_a_full_posterior(both: Both) -> None:
     assert nuts.acceptance.shape == (4, 5)
     assert np.all((nuts.acceptance > 0.5) & (nuts.acceptance <= 1.0))
     assert nuts.warnings == (), nuts.warnings
-    assert both.ticks[-1] == 4 * (300 + 600)
-    assert both.ticks == sorted(both.ticks)
+    # Progress from the spawned child: each chain after its warm-up and after each of
+    # its 10 chunks of 60 draws, all relayed before calibrate returns.
+    per_chain = [c * 900 + 300 + 60 * k for c in range(4) for k in range(11)]
+    assert both.ticks == per_chain
     # The stored log-density is the numpy posterior at the draws (Jacobian removed);
     # 1e-10 as in test_jax_log_posterior_equals_the_numpy_one.
     v = np.concatenate([nuts.unit_draws[1, 7], [nuts.lam[1, 7], nuts.lam_star[1, 7]]])

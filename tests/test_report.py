@@ -17,7 +17,8 @@ import xarray as xr
 
 from bayescal.calibration.posterior import Posterior, calibrate
 from bayescal.emulator.assemble import Assembled, assemble
-from bayescal.emulator.gp import Emulator, LooResult, train
+from bayescal.emulator.gp import Emulator, LooResult
+from bayescal.emulator.training import train
 from bayescal.pipeline.predict import (
     delta_series,
     metrics_table,

@@ -14,9 +14,9 @@ import pytest
 from click.testing import CliRunner
 
 from bayescal.artefacts import load_posterior
-from bayescal.calibration.chains import run_chains
-from bayescal.calibration.samplers.mwg import MetropolisWithinGibbs
 from bayescal.cli import main
+from bayescal.mcmc.chains import run_chains
+from bayescal.mcmc.samplers.mwg import MetropolisWithinGibbs
 
 SAMPLER = MetropolisWithinGibbs(n_burn=300, lower=[0.0, -np.inf], batch_size=25, max_adapt=0.1)
 
@@ -45,7 +45,7 @@ def _run(target: Target, folder: Path | None) -> np.ndarray:
         [[1.0, 0.0], [2.0, 0.5]],
         500,
         seed=11,
-        parallel=False,
+        backend="serial",
         checkpoint_dir=folder,
         checkpoint_seconds=0.0,
     )
@@ -74,12 +74,53 @@ def test_stale_snapshot_is_ignored(tmp_path: Path) -> None:
         [[1.0, 0.0], [2.0, 0.5]],
         500,
         seed=12,
-        parallel=False,
+        backend="serial",
         checkpoint_dir=tmp_path,
         checkpoint_seconds=0.0,
     )
-    fresh = run_chains(SAMPLER, Target(), [[1.0, 0.0], [2.0, 0.5]], 500, seed=12, parallel=False)
+    fresh = run_chains(SAMPLER, Target(), [[1.0, 0.0], [2.0, 0.5]], 500, seed=12, backend="serial")
     np.testing.assert_array_equal(other.draws, fresh.draws)
+
+
+class BatchTarget(Target):
+    """:class:`Target` evaluated for all chains at once (``batch``), dying after ``limit`` calls."""
+
+    def batch(self, points: np.ndarray) -> np.ndarray:
+        self.calls += 1
+        if self.limit is not None and self.calls > self.limit:
+            raise Interrupt
+        x0, x1 = points[:, 0], points[:, 1]
+        return -0.5 * ((np.log(x0) - x1) ** 2 / 0.1 + x1**2) - np.log(x0)
+
+
+def _run_lockstep(target: Target, folder: Path | None) -> np.ndarray:
+    chains = run_chains(
+        SAMPLER,
+        target,
+        [[1.0, 0.0], [2.0, 0.5], [0.5, -0.5], [1.5, 1.0]],
+        500,
+        seed=11,
+        backend="vectorised",
+        checkpoint_dir=folder,
+        checkpoint_seconds=0.0,
+    )
+    return chains.draws
+
+
+@pytest.mark.parametrize("limit", [60, 777, 1500])
+def test_interrupted_lockstep_chains_resume_identically(tmp_path: Path, limit: int) -> None:
+    reference = _run_lockstep(BatchTarget(), None)
+    with pytest.raises(Interrupt):
+        _run_lockstep(BatchTarget(limit), tmp_path)
+    assert [p.name for p in tmp_path.iterdir()] == ["lockstep.npz"]
+    resumed_target = BatchTarget()
+    resumed = _run_lockstep(resumed_target, tmp_path)
+    np.testing.assert_array_equal(resumed, reference)
+    # Fresh: 1 start + 800 sweeps x 2 coordinates = 1601 batched calls. Killed at call
+    # `limit`, (limit - 1) // 2 sweeps were done and every finished batch of 25 was
+    # snapshotted; the resumed run does only the rest (+ 1 call to rebuild the state).
+    kept = 25 * (((limit - 1) // 2) // 25)
+    assert resumed_target.calls == 2 * (800 - kept) + 1
 
 
 SCRIPT = """

@@ -7,7 +7,7 @@ import numpy as np
 from bayescal.calibration.posterior import calibrate
 from bayescal.design import Design
 from bayescal.emulator.assemble import assemble
-from bayescal.emulator.gp import TrainingPosterior, train
+from bayescal.emulator.training import TrainingPosterior, train
 from virtual_wall import virtual_experiment
 
 

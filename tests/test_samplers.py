@@ -23,7 +23,8 @@ import pytest
 from numpy.typing import NDArray
 from scipy import linalg, stats
 
-from bayescal.calibration import (
+from bayescal.errors import ConfigError
+from bayescal.mcmc import (
     AdaptiveMetropolis,
     Chains,
     LogDensityError,
@@ -32,8 +33,7 @@ from bayescal.calibration import (
     dispersed_starts,
     run_chains,
 )
-from bayescal.calibration.samplers.base import BoundsMethod, Box
-from bayescal.errors import ConfigError
+from bayescal.mcmc.samplers.base import BoundsMethod, Box
 
 N_SE = 4.0  # tolerance in Monte Carlo standard errors (see module docstring)
 
@@ -185,7 +185,7 @@ def test_correlated_gaussian_moments(kind: str) -> None:
     target = Gaussian(CORR_MEAN, CORR_COV)
     sampler = SAMPLERS[kind](n_burn=3000)
     starts = dispersed_starts([-np.inf] * 3, [np.inf] * 3, 4, np.random.default_rng(0), spread=3.0)
-    chains = run_chains(sampler, target, starts, 6000, seed=11, parallel=False)
+    chains = run_chains(sampler, target, starts, 6000, seed=11, backend="serial")
     assert_within_mcse(moment_errors(chains.draws, CORR_MEAN, CORR_COV))
 
 
@@ -194,7 +194,7 @@ def test_beta_2_5_with_bounds(bounds: BoundsMethod) -> None:
     a, b = 2.0, 5.0
     sampler = MetropolisWithinGibbs(n_burn=2000, lower=[0.0], upper=[1.0], bounds=bounds)
     chains = run_chains(sampler, Beta(a, b), lambda r: r.uniform(0.1, 0.9, 1), 6000,
-                        seed=5, parallel=False)  # fmt: skip
+                        seed=5, backend="serial")  # fmt: skip
     dist = stats.beta(a, b)
     errors = moment_errors(chains.draws, np.array([dist.mean()]), np.array([[dist.var()]]))
     assert_within_mcse(errors)
@@ -208,7 +208,7 @@ def test_rho_prior_beta_1_01_piled_at_one(kind: str) -> None:
     a, b = 1.0, 0.1
     sampler = SAMPLERS[kind](n_burn=4000, lower=[0.0])
     chains = run_chains(sampler, RhoAsBeta(a, b), lambda r: r.uniform(0.5, 4.0, 1), 10000,
-                        seed=8, parallel=False)  # fmt: skip
+                        seed=8, backend="serial")  # fmt: skip
     beta = chains.draws
     dist = stats.beta(a, b)
     errors = moment_errors(np.exp(-beta / 4.0), np.array([dist.mean()]), np.array([[dist.var()]]))
@@ -239,7 +239,7 @@ def test_linear_gaussian_calibration_posterior(kind: str) -> None:
     mean, cov = problem.posterior()
     sampler = SAMPLERS[kind](n_burn=3000, scales=0.2)
     starts = mean + 0.5 * np.random.default_rng(1).normal(size=(4, 3))
-    chains = run_chains(sampler, problem, starts, 6000, seed=21, parallel=False)
+    chains = run_chains(sampler, problem, starts, 6000, seed=21, backend="serial")
     assert_within_mcse(moment_errors(chains.draws, mean, cov))
 
 
@@ -251,10 +251,10 @@ def test_same_seed_same_draws_different_seed_different(kind: str) -> None:
     sampler = SAMPLERS[kind](n_burn=100, lower=[0.0, -np.inf], upper=[1.0, np.inf])
     target = Gaussian(np.array([0.5, 0.0]), np.eye(2))
     starts = np.array([[0.5, 0.0]] * 4)
-    serial = run_chains(sampler, target, starts, 300, seed=7, parallel=False)
-    again = run_chains(sampler, target, starts, 300, seed=7, parallel=False)
-    in_processes = run_chains(sampler, target, starts, 300, seed=7, parallel=True)
-    other = run_chains(sampler, target, starts, 300, seed=8, parallel=False)
+    serial = run_chains(sampler, target, starts, 300, seed=7, backend="serial")
+    again = run_chains(sampler, target, starts, 300, seed=7, backend="serial")
+    in_processes = run_chains(sampler, target, starts, 300, seed=7, backend="processes")
+    other = run_chains(sampler, target, starts, 300, seed=8, backend="serial")
     assert np.array_equal(serial.draws, again.draws)
     assert np.array_equal(serial.draws, in_processes.draws)
     assert not np.array_equal(serial.draws[0], serial.draws[1])  # chains get distinct streams
@@ -382,13 +382,13 @@ def test_invalid_settings_raise_config_error() -> None:
 
 
 def test_unpicklable_log_density_is_reported_before_starting_processes() -> None:
-    with pytest.raises(ConfigError, match="parallel=False"):
+    with pytest.raises(ConfigError, match="backend='serial'"):
         run_chains(MetropolisWithinGibbs(n_burn=5), lambda x: 0.0, np.zeros((4, 1)), 5, seed=0)
 
 
 def test_chains_pickle_and_shapes() -> None:
     chains = run_chains(MetropolisWithinGibbs(n_burn=10), zero_log_density, np.zeros((4, 2)), 25,
-                        seed=3, names=["a", "b"], parallel=False)  # fmt: skip
+                        seed=3, names=["a", "b"], backend="serial")  # fmt: skip
     assert isinstance(pickle.loads(pickle.dumps(chains)), Chains)
     assert chains.draws.shape == (4, 25, 2)
     assert chains.log_density.shape == (4, 25)

@@ -23,15 +23,15 @@ import pytest
 from numpy.typing import NDArray
 from scipy import stats
 
-from bayescal.calibration import MetropolisWithinGibbs, run_chains
-from bayescal.calibration.diagnostics import _arviz
-from bayescal.calibration.posterior import CalibrationPosterior
-from bayescal.calibration.samplers import AdaptiveMetropolis
-from bayescal.calibration.samplers.mwg_batch import BatchedPosterior, as_lockstep, run_lockstep
+from bayescal.calibration.kron import KronCalibrationDensity
+from bayescal.calibration.target import BatchedPosterior, CalibrationPosterior
 from bayescal.design import BetaPrior, UniformPrior
 from bayescal.emulator.kernel import SeparableKernel
-from bayescal.emulator.kron import KronCalibrationDensity
 from bayescal.errors import ConfigError
+from bayescal.mcmc import MetropolisWithinGibbs, run_chains
+from bayescal.mcmc.diagnostics import import_arviz
+from bayescal.mcmc.samplers import AdaptiveMetropolis
+from bayescal.mcmc.samplers.lockstep import as_lockstep, run_lockstep
 
 N_SE = 4.0  # tolerance in Monte Carlo standard errors (see module docstring)
 # Batch and loop make the same BLAS calls per point; only the order of the final
@@ -102,10 +102,10 @@ def test_not_positive_definite_rows_give_minus_inf_or_raise() -> None:
     # den = -l_x + a_0 with a_0 = 1 / (lam ktk_0) = 0.5 / lam is negative somewhere
     # exactly when a_0 <= max(l_x): for lam = 1 (a_0 = 0.5 < max l_x, as the S_x of 8
     # periods has eigenvalues summing to 8), not for lam = 0.01 or 0.001 (a_0 >= 50).
-    l_t = session.stacked.l_t.copy()
+    l_t = session.grid.l_t.copy()
     l_t[0, 0] = -1.0
-    bad = dataclasses.replace(session.stacked, l_t=l_t)
-    density._batch_stacked = bad
+    bad = dataclasses.replace(session.grid, l_t=l_t)
+    density._grid = bad
     expect_bad = (-bad.l_x[0].max() + 0.5 / lam) <= 0.0
     assert expect_bad.tolist() == [True, False, False]
     values = density.logpdf_batch(ts, lam, ls, errors="-inf")
@@ -121,7 +121,7 @@ def _posterior(density: KronCalibrationDensity) -> CalibrationPosterior:
 
 def test_batched_posterior_equals_the_scalar_one_and_is_minus_inf_outside() -> None:
     target = _posterior(_density())
-    batched = BatchedPosterior(_posterior(_density()))
+    batched = _posterior(_density()).lockstep()
     rng = np.random.default_rng(2)
     points = np.column_stack([rng.uniform(-0.1, 1.1, (30, 3)), rng.uniform(-0.2, 3.0, (30, 2))])
     got = batched(points)
@@ -208,7 +208,7 @@ def test_lockstep_with_a_row_loop_and_start_functions_matches_serial() -> None:
         return np.array([0.0, -2.0, 0.5, 1.0]) + 0.1 * rng.random(4)
 
     sampler = dataclasses.replace(_gauss_sampler(100), fixed=[1], bounds="reflect")
-    serial = run_chains(sampler, target, start, 150, seed=5, n_chains=4, parallel=False)
+    serial = run_chains(sampler, target, start, 150, seed=5, n_chains=4, backend="serial")
     lockstep = run_chains(sampler, target, start, 150, seed=5, n_chains=4, backend="vectorised")
     np.testing.assert_array_equal(lockstep.draws, serial.draws)
     assert np.all(lockstep.draws[:, :, 1] == lockstep.draws[:, :1, 1])  # the fixed coordinate
@@ -216,7 +216,7 @@ def test_lockstep_with_a_row_loop_and_start_functions_matches_serial() -> None:
 
 
 def test_lockstep_draws_have_the_exact_means() -> None:
-    az = _arviz()
+    az = import_arviz()
     chains = run_chains(
         _gauss_sampler(1000), GaussianTarget(), STARTS[:4], 4000, seed=3, backend="vectorised"
     )
@@ -240,7 +240,7 @@ def test_calibration_posterior_lockstep_equals_serial() -> None:
         max_adapt=0.25,
     )
     starts = np.column_stack([np.random.default_rng(4).uniform(0.1, 0.9, (4, 3)), np.ones((4, 2))])
-    serial = run_chains(sampler, _posterior(_density()), starts, 200, seed=8, parallel=False)
+    serial = run_chains(sampler, _posterior(_density()), starts, 200, seed=8, backend="serial")
     lockstep = run_chains(
         sampler, _posterior(_density()), starts, 200, seed=8, backend="vectorised"
     )
@@ -267,9 +267,6 @@ def test_vectorised_backend_is_refused_where_it_does_not_apply(tmp_path: Any) ->
     with pytest.raises(ConfigError, match="needs a MetropolisWithinGibbs"):
         run_chains(AdaptiveMetropolis(n_burn=10), GaussianTarget(), STARTS, 5, seed=0,
                    backend="vectorised")  # fmt: skip
-    with pytest.raises(ConfigError, match="does not write checkpoints"):
-        run_chains(_gauss_sampler(10), GaussianTarget(), STARTS, 5, seed=0,
-                   backend="vectorised", checkpoint_dir=tmp_path)  # fmt: skip
     with pytest.raises(ConfigError, match="chain backend must be one of"):
         run_chains(_gauss_sampler(10), GaussianTarget(), STARTS, 5, seed=0,
                    backend="gpu")  # type: ignore[arg-type]  # fmt: skip

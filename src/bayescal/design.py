@@ -40,6 +40,7 @@ __all__ = [
     "Prior",
     "UniformPrior",
     "latin_hypercube",
+    "log_gamma",
     "prior_from_spec",
 ]
 
@@ -56,6 +57,17 @@ def _finite(value: float, what: str) -> float:
     if not math.isfinite(number):
         raise ConfigError(f"{what} must be finite, got {value!r}")
     return number
+
+
+def log_gamma(value: float, shape: float, rate: float) -> float:
+    """Log Gamma(shape, rate) density of a precision, up to its constant; ``-inf`` if <= 0.
+
+    The priors of the precisions ``lambda``, ``lambda*`` and ``tau`` of the
+    paper's eqs. 7 and 9: ``(shape - 1) log value - rate value``.
+    """
+    if not value > 0.0:
+        return -math.inf
+    return (shape - 1.0) * math.log(value) - rate * value
 
 
 @dataclass(frozen=True)

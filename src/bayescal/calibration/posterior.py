@@ -1,9 +1,10 @@
-"""Calibration posterior of theta*, lambda and lambda* (the paper's eq. 16).
+"""Calibration posterior of theta*, lambda and lambda* (the paper's eq. 16): sample and judge.
 
 With the emulator's hyperparameters fixed at their MAP, the stacked weights
-``v_j = [w_j; w*_j]`` are ``N(0, Omega_j)`` (eqs. 12, 14, 17). The sampled
-vector is ``[u_1 .. u_t, lambda, lambda*]`` where ``u`` is ``theta*`` on the
-normalised scale [0, 1] of the prior bounds; the log posterior adds
+``v_j = [w_j; w*_j]`` are ``N(0, Omega_j)`` (eqs. 12, 14, 17;
+:mod:`bayescal.calibration.target`). The sampled vector is ``[u_1 .. u_t,
+lambda, lambda*]`` where ``u`` is ``theta*`` on the normalised scale [0, 1] of
+the prior bounds; the log posterior adds
 
 * the study priors of ``theta*`` on that scale (uniform, or Beta(a, b) on the
   bounds: :meth:`bayescal.design.Prior.logpdf_unit`);
@@ -11,7 +12,7 @@ normalised scale [0, 1] of the prior bounds; the log posterior adds
 * ``lambda* ~ Gamma(a + m* (n - p) / 2, b + RSS* / 2)``, eq. 7 applied to the
   measured periods ``Y*``.
 
-The likelihood goes through :class:`bayescal.emulator.kron.KronCalibrationDensity`
+The likelihood goes through :class:`bayescal.calibration.kron.KronCalibrationDensity`
 (default) or the dense reference. :func:`calibrate` runs ``n_chains`` (>= 4)
 adaptive Metropolis-within-Gibbs chains (or, with the optional extra
 ``bayescal[hmc]``, NUTS chains: :mod:`bayescal.calibration.hmc`) from
@@ -25,99 +26,39 @@ them).
 from __future__ import annotations
 
 import dataclasses
-import math
 import os
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, Literal
+from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 from numpy.typing import ArrayLike
 
-from bayescal.calibration.chains import BACKENDS, ChainBackend, run_chains
-from bayescal.calibration.diagnostics import Diagnostics, _arviz, diagnose
-from bayescal.calibration.hmc import check_installed, sample_nuts_isolated
-from bayescal.calibration.samplers.mwg import MetropolisWithinGibbs
-from bayescal.calibration.samplers.rwm import AdaptiveMetropolis
-from bayescal.config import NUTS_MIN_WARMUP
-from bayescal.design import Prior, UniformPrior
+from bayescal.calibration.hmc import sample_nuts_isolated
+from bayescal.calibration.kron import Kind
+from bayescal.calibration.target import (
+    LAMBDA_NAMES,
+    CalibrationPosterior,
+    build_target,
+    default_starts,
+    sample,
+)
+from bayescal.design import Prior
 from bayescal.emulator.assemble import Assembled
 from bayescal.emulator.gp import Emulator
 from bayescal.emulator.kernel import FloatArray
-from bayescal.emulator.kron import CalibrationAlgebra, Kind, make_algebra
 from bayescal.errors import ConfigError
+from bayescal.mcmc.chains import BACKENDS, ChainBackend
+from bayescal.mcmc.diagnostics import Diagnostics, diagnose, import_arviz
+from bayescal.mcmc.nuts import NUTS_MIN_WARMUP, check_installed
 
 if TYPE_CHECKING:
     import pandas as pd
     from arviz import InferenceData
 
-__all__ = ["CalibrationPosterior", "Posterior", "calibrate"]
+__all__ = ["LAMBDA_NAMES", "CalibrationPosterior", "Posterior", "calibrate"]
 
-Backend = ChainBackend
-SamplerKind = Literal["mwg", "block", "nuts"]
-LAMBDA_NAMES = ("lambda", "lambda_star")
-
-
-def _log_gamma(value: float, shape: float, rate: float) -> float:
-    if not value > 0.0:
-        return -math.inf
-    return (shape - 1.0) * math.log(value) - rate * value
-
-
-class CalibrationPosterior:
-    """Log posterior of eq. 16 at ``[u_1 .. u_t, lambda, lambda*]``, up to a constant.
-
-    Picklable (for chains in worker processes). Non-positive-definite
-    covariances count as zero density.
-
-    Parameters
-    ----------
-    algebra
-        Likelihood back end (Kronecker or dense) built with the MAP kernels.
-    priors
-        One prior per parameter, in the order of ``u``.
-    lam_prior, lam_star_prior
-        ``(shape, rate)`` of the Gamma priors of ``lambda`` and ``lambda*``.
-    """
-
-    def __init__(
-        self,
-        algebra: CalibrationAlgebra,
-        priors: Sequence[Prior],
-        lam_prior: tuple[float, float],
-        lam_star_prior: tuple[float, float],
-    ) -> None:
-        self.algebra = algebra
-        self.priors = tuple(priors)
-        self.t = len(self.priors)
-        self.lam_prior = (float(lam_prior[0]), float(lam_prior[1]))
-        self.lam_star_prior = (float(lam_star_prior[0]), float(lam_star_prior[1]))
-
-    def log_prior(self, v: ArrayLike) -> float:
-        """Log prior density of ``[u, lambda, lambda*]`` (up to a constant)."""
-        arr = np.asarray(v, dtype=float)
-        total = _log_gamma(float(arr[self.t]), *self.lam_prior)
-        total += _log_gamma(float(arr[self.t + 1]), *self.lam_star_prior)
-        for k, prior in enumerate(self.priors):
-            if total == -math.inf:
-                break
-            if type(prior) is UniformPrior:  # the common case, without numpy's overhead
-                total += 0.0 if 0.0 <= float(arr[k]) <= 1.0 else -math.inf
-            else:
-                total += float(prior.logpdf_unit(arr[k]))
-        return total
-
-    def __call__(self, v: ArrayLike) -> float:
-        """Log posterior (eq. 16) at ``v = [u_1 .. u_t, lambda, lambda*]``."""
-        arr = np.asarray(v, dtype=float)
-        prior = self.log_prior(arr)
-        if prior == -math.inf:
-            return prior
-        try:
-            lik = self.algebra.logpdf(arr[: self.t], float(arr[self.t]), float(arr[self.t + 1]))
-        except np.linalg.LinAlgError:
-            return -math.inf
-        return prior + lik
+SamplerKind = Literal["mwg", "nuts"]
 
 
 @dataclass(frozen=True)
@@ -236,7 +177,7 @@ class Posterior:
 
     def inference_data(self) -> InferenceData:
         """ArviZ ``InferenceData``: posterior (physical theta*, lambda, lambda*), lp, seed."""
-        az = _arviz()
+        az = import_arviz()
         draws = self.all_draws()
         posterior = {n: draws[..., k] for k, n in enumerate(self.all_names)}
         return az.from_dict(
@@ -246,7 +187,7 @@ class Posterior:
         )
 
 
-def _check_priors(assembled: Assembled, priors: Mapping[str, Prior] | None) -> dict[str, Prior]:
+def check_priors(assembled: Assembled, priors: Mapping[str, Prior] | None) -> dict[str, Prior]:
     if priors is None:
         return dict(assembled.priors)
     if tuple(priors) != assembled.parameter_names:
@@ -265,37 +206,6 @@ def _check_priors(assembled: Assembled, priors: Mapping[str, Prior] | None) -> d
     return dict(priors)
 
 
-def _starts(target: CalibrationPosterior, n_chains: int, rng: np.random.Generator) -> FloatArray:
-    """Dispersed starts: theta* by strata in [0.05, 0.95], precisions from their priors."""
-    t = target.t
-    strata = (
-        np.argsort(rng.random((t, n_chains)), axis=1).T + rng.random((n_chains, t))
-    ) / n_chains
-    lam = rng.gamma(target.lam_prior[0], 1.0 / target.lam_prior[1], n_chains)
-    lam_star = rng.gamma(target.lam_star_prior[0], 1.0 / target.lam_star_prior[1], n_chains)
-    return np.column_stack([0.05 + 0.9 * strata, lam, lam_star])
-
-
-def _sampler(kind: SamplerKind, target: CalibrationPosterior, n_burn: int) -> Any:
-    t = target.t
-    lower = [0.0] * (t + 2)
-    upper = [1.0] * t + [math.inf, math.inf]
-    # Logit-scale widths for theta*, ~2.4 prior log-sd for the sharply known precisions.
-    scales = [0.5] * t + [
-        2.4 / math.sqrt(target.lam_prior[0]),
-        2.4 / math.sqrt(target.lam_star_prior[0]),
-    ]
-    if kind == "mwg":
-        # Short batches and a generous cap: the widths of sharply identified
-        # parameters must shrink by ~e^3 within a burn-in of a few hundred sweeps.
-        return MetropolisWithinGibbs(
-            n_burn=n_burn, lower=lower, upper=upper, scales=scales, batch_size=25, max_adapt=0.25
-        )
-    if kind == "block":
-        return AdaptiveMetropolis(n_burn=n_burn, lower=lower, upper=upper, scales=scales)
-    raise ConfigError(f"sampler must be 'mwg', 'block' or 'nuts', got {kind!r}")
-
-
 def calibrate(
     emulator: Emulator,
     assembled: Assembled,
@@ -305,7 +215,7 @@ def calibrate(
     n_burn: int = 1000,
     n_draws: int = 1000,
     seed: int = 0,
-    backend: Backend = "processes",
+    backend: ChainBackend = "processes",
     algebra: Kind = "kronecker",
     sampler: SamplerKind = "mwg",
     callback: Callable[[int], None] | None = None,
@@ -337,8 +247,7 @@ def calibrate(
     algebra
         ``"kronecker"`` (fast, default) or ``"dense"`` (reference).
     sampler
-        ``"mwg"`` (Metropolis-within-Gibbs), ``"block"`` (adaptive block
-        Metropolis) or ``"nuts"`` (No-U-Turn sampler with window adaptation,
+        ``"mwg"`` (Metropolis-within-Gibbs) or ``"nuts"`` (No-U-Turn sampler with window adaptation,
         :func:`bayescal.calibration.hmc.sample_nuts`; needs the extra
         ``bayescal[hmc]`` and ``algebra="kronecker"``). With ``"nuts"``
         ``n_burn`` is the warm-up length, the chains run one after another in
@@ -351,7 +260,7 @@ def calibrate(
         Progress: called with the iterations completed over all chains.
     checkpoint_dir
         Folder for per-chain snapshots; a killed run resumes from them with
-        identical draws (see :func:`bayescal.calibration.chains.run_chains`).
+        identical draws (see :func:`bayescal.mcmc.chains.run_chains`).
         Not supported by ``"nuts"`` (ignored).
     checkpoint_seconds
         Minimum wall time between two snapshots of a chain. [s]
@@ -362,6 +271,8 @@ def calibrate(
     """
     if backend not in BACKENDS:
         raise ConfigError(f"backend must be one of {list(BACKENDS)}, got {backend!r}")
+    if sampler not in ("mwg", "nuts"):
+        raise ConfigError(f"sampler must be 'mwg' or 'nuts', got {sampler!r}")
     if sampler == "nuts":
         check_installed()
         if n_burn < NUTS_MIN_WARMUP:
@@ -376,36 +287,31 @@ def calibrate(
                 f"algebra {algebra!r}",
                 hint="set [emulator] algebra = 'kronecker' or use sampler 'mwg'",
             )
-    prior_map = _check_priors(assembled, priors)
-    alg = make_algebra(
-        algebra,
-        emulator.theta,
-        emulator.x,
-        emulator.kernels,
-        emulator.basis.ktk,
-        emulator.w,
+    prior_map = check_priors(assembled, priors)
+    target = build_target(
+        emulator,
         assembled.w_star,
+        assembled.lam_star_prior,
+        list(prior_map.values()),
+        algebra=algebra,
     )
-    target = CalibrationPosterior(
-        alg, list(prior_map.values()), emulator.lam_prior, assembled.lam_star_prior
-    )
-    starts = _starts(target, n_chains, np.random.default_rng([seed, 2]))
+    starts = default_starts(target, n_chains, seed)
     if sampler == "nuts":
         return _calibrate_nuts(
             target, starts, prior_map, assembled.parameter_names, n_burn, n_draws, seed, callback
         )
-    names = (*assembled.parameter_names, *LAMBDA_NAMES)
-    chains = run_chains(
-        _sampler(sampler, target, n_burn),
+    chains = sample(
         target,
-        starts,
         n_draws,
+        n_burn=n_burn,
+        n_chains=n_chains,
         seed=seed,
-        names=names,
         backend=backend,
+        names=(*assembled.parameter_names, *LAMBDA_NAMES),
         callback=callback,
         checkpoint_dir=checkpoint_dir,
         checkpoint_seconds=checkpoint_seconds,
+        starts=starts,
     )
     draws = chains.draws
     t = target.t

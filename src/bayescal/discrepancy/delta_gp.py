@@ -52,7 +52,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 from scipy import linalg, optimize
 
-from bayescal.emulator.gp import _log_prior_beta
+from bayescal.emulator.hyper import log_prior_beta
 from bayescal.emulator.kernel import FloatArray, correlation
 from bayescal.errors import ConfigError, DataError
 
@@ -193,7 +193,7 @@ class _Component:
         s = self.x.shape[1]
         with np.errstate(over="ignore"):
             beta, tau, nu = np.exp(phi[:s]), math.exp(phi[s]), math.exp(phi[s + 1])
-        prior = _log_prior_beta(beta, _RHO_A, _RHO_B) + float(np.sum(phi[:s]))
+        prior = log_prior_beta(beta, _RHO_A, _RHO_B) + float(np.sum(phi[:s]))
         prior += _TAU_SHAPE * math.log(tau) - _TAU_RATE * tau
         prior += -_NU_SHAPE * phi[s + 1] - _NU_SHAPE * self.nu0 / nu
         if not math.isfinite(prior):

@@ -47,8 +47,8 @@ from typing import TYPE_CHECKING, Literal
 import numpy as np
 from numpy.typing import ArrayLike
 
-from bayescal.calibration.chains import run_chains
-from bayescal.calibration.posterior import Posterior, _check_priors
+from bayescal.calibration.kron import Kind, make_algebra
+from bayescal.calibration.posterior import Posterior, check_priors
 from bayescal.design import Prior
 from bayescal.discrepancy.delta_gp import MAX_COMPONENTS, DeltaGP, Trend, fit_delta_gp
 from bayescal.discrepancy.phase import DeltaPhase, EmpiricalDeltaSampler
@@ -56,15 +56,13 @@ from bayescal.discrepancy.priors import default_priors
 from bayescal.emulator.assemble import Assembled, OutputStack
 from bayescal.emulator.gp import Emulator
 from bayescal.emulator.kernel import FloatArray
-from bayescal.emulator.kron import Kind, make_algebra
 from bayescal.errors import ConfigError, DataError
+from bayescal.mcmc.chains import ChainBackend, run_chains
 
 if TYPE_CHECKING:
     import pandas as pd
 
 __all__ = ["Discrepancy", "estimate_discrepancy"]
-
-Backend = Literal["processes", "serial"]
 
 
 @dataclass(frozen=True)
@@ -298,7 +296,7 @@ def estimate_discrepancy(
     n_burn: int = 1000,
     n_draws: int = 1000,
     seed: int = 0,
-    backend: Backend = "processes",
+    backend: ChainBackend = "processes",
     callback: Callable[[int], None] | None = None,
     algebra: Kind = "kronecker",
     max_components: int = MAX_COMPONENTS,
@@ -347,7 +345,7 @@ def estimate_discrepancy(
     """
     _check_settings(realisations, update_interval, n_chains, n_burn, n_draws, backend)
     _check_match(emulator, assembled, posterior)
-    prior_map = default_priors(posterior) if priors is None else _check_priors(assembled, priors)
+    prior_map = default_priors(posterior) if priors is None else check_priors(assembled, priors)
     lam, lam_star = float(np.mean(posterior.lam)), float(np.mean(posterior.lam_star))
     alg = make_algebra(
         algebra,
@@ -370,7 +368,7 @@ def estimate_discrepancy(
         n_draws,
         seed=seed,
         names=assembled.parameter_names,
-        parallel=backend == "processes",
+        backend=backend,
         callback=callback,
     )
     shape = chains.draws.shape[:2]

@@ -61,7 +61,7 @@ steps", and the reason it keeps the earlier posteriors as priors.
 Sampling
 --------
 Between two updates the target of ``theta*`` is fixed: its prior plus the log
-density of eq. 19 (:class:`bayescal.emulator.kron.KronCalibrationDensity` with
+density of eq. 19 (:class:`bayescal.calibration.kron.KronCalibrationDensity` with
 per-period nuggets ``B_j``) plus the constant of eq. 23.
 :class:`EmpiricalDeltaSampler` runs Metropolis-within-Gibbs segments of
 ``update_interval`` sweeps and re-estimates ``Delta_i``, ``A_i``, ``w*`` and ``B``
@@ -82,13 +82,15 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike
 
-from bayescal.calibration.samplers.base import Callback, LogDensity, SamplerResult
-from bayescal.calibration.samplers.mwg import MetropolisWithinGibbs
+from bayescal.calibration.kron import CalibrationAlgebra
+from bayescal.calibration.priors import ThetaPriors
 from bayescal.design import Prior
 from bayescal.emulator.gp import Emulator
 from bayescal.emulator.kernel import FloatArray
-from bayescal.emulator.kron import CalibrationAlgebra
 from bayescal.errors import ConfigError
+from bayescal.mcmc.chains import Offset
+from bayescal.mcmc.samplers.base import Callback, LogDensity, SamplerResult
+from bayescal.mcmc.samplers.mwg import MetropolisWithinGibbs
 
 __all__ = [
     "DeltaPhase",
@@ -211,15 +213,6 @@ def gls_observations(
     return GlsObservations(w_star, np.ascontiguousarray(nuggets), extra)
 
 
-def _log_prior(priors: Sequence[Prior], u: FloatArray) -> float:
-    total = 0.0
-    for i, prior in enumerate(priors):
-        total += float(prior.logpdf_unit(u[i]))
-        if total == -math.inf:
-            break
-    return total
-
-
 class DeltaTarget:
     """Log density of ``u = theta*`` (normalised) between two updates; picklable.
 
@@ -247,7 +240,7 @@ class DeltaTarget:
         gls: GlsObservations,
     ) -> None:
         self.algebra = algebra
-        self.priors = tuple(priors)
+        self.priors = ThetaPriors(tuple(priors))
         self.a = a
         self.nuggets = gls.nuggets
         self.extra = gls.extra
@@ -255,7 +248,7 @@ class DeltaTarget:
     def __call__(self, u: ArrayLike) -> float:
         """Log density at ``u`` (``(t,)``, normalised theta*)."""
         arr = np.asarray(u, dtype=float)
-        prior = _log_prior(self.priors, arr)
+        prior = self.priors.scalar(arr)
         if prior == -math.inf:
             return prior
         try:
@@ -302,13 +295,14 @@ class DeltaPhase:
         self.y_star = np.asarray(y_star, dtype=float)
         self.algebra = algebra
         self.priors = tuple(priors)
+        self.theta_priors = ThetaPriors(self.priors)
         self.a = 1.0 / (float(lam) * emulator.basis.ktk)
         self.noise = 1.0 / float(lam_star)
         self.realisations = int(realisations)
 
     def __call__(self, u: ArrayLike) -> float:
         """Log prior of ``u``."""
-        return _log_prior(self.priors, np.asarray(u, dtype=float))
+        return self.theta_priors.scalar(np.asarray(u, dtype=float))
 
     def moments(self, u: ArrayLike, rng: np.random.Generator) -> PeriodMoments:
         """Empirical ``Delta_i`` and ``D_i`` (eq. 25) at normalised ``theta* = u``."""
@@ -322,17 +316,6 @@ class DeltaPhase:
         mom = self.moments(u, rng)
         gls = gls_observations(self.emulator.basis.k, self.y_star, mom.factor, self.noise)
         return DeltaTarget(self.algebra.with_observations(gls.w_star), self.priors, self.a, gls)
-
-
-@dataclass(frozen=True)
-class _Shift:
-    """Progress of a segment reported as progress of the whole chain."""
-
-    callback: Callback
-    offset: int
-
-    def __call__(self, iteration: int) -> None:
-        self.callback(self.offset + iteration)
 
 
 def _segments(n_burn: int, total: int, interval: int) -> list[tuple[int, int]]:
@@ -408,7 +391,7 @@ class EmpiricalDeltaSampler:
                 batch_size=self.batch_size,
                 max_adapt=self.max_adapt,
             )
-            shift = None if callback is None else _Shift(callback, start)
+            shift = None if callback is None else Offset(callback, start)
             res = inner.run(target, x, 1 if burn else size, rng, callback=shift)
             x = res.draws[-1].copy()
             scales = res.scales

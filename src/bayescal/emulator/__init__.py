@@ -1,10 +1,15 @@
-"""Gaussian-process emulator on PCA weights: basis, kernel and likelihood algebra.
+"""Gaussian-process emulator on PCA weights: basis, kernel, likelihood algebra, training.
 
 * :mod:`~bayescal.emulator.basis` -- standardisation, output PCA (GPMSA
   scaling), weights (eqs. 6, 13), the eq. 7 precision update, input PCA.
+* :mod:`~bayescal.emulator.assemble` -- periods cut, standardised and projected.
 * :mod:`~bayescal.emulator.kernel` -- the separable covariance of eq. 8.
 * :mod:`~bayescal.emulator.dense` -- dense Cholesky reference likelihoods.
-* :mod:`~bayescal.emulator.kron` -- fast Kronecker likelihoods (the default).
+* :mod:`~bayescal.emulator.kron` -- fast Kronecker training likelihood (eqs. 5, 10).
+* :mod:`~bayescal.emulator.training` -- the hyperparameter posterior (eq. 9), MCMC and MAP.
+* :mod:`~bayescal.emulator.gp` -- the trained emulator: prediction, leave-one-run-out CV.
+
+The calibration likelihood (eqs. 12-16) is in :mod:`bayescal.calibration`.
 """
 
 from bayescal.emulator.basis import (
@@ -18,30 +23,19 @@ from bayescal.emulator.basis import (
     stack_outputs,
     standardise,
 )
-from bayescal.emulator.dense import (
-    DenseCalibrationDensity,
-    GridData,
-    dense_logpdf,
-    dense_training_logpdf,
-)
+from bayescal.emulator.dense import GridData, dense_logpdf, dense_training_logpdf
 from bayescal.emulator.kernel import LogDensity, SeparableKernel, beta_to_rho, rho_to_beta
 from bayescal.emulator.kron import (
-    CalibrationAlgebra,
-    KronCalibrationDensity,
     SymEig,
     kron_training_basis,
     kron_training_logpdf,
-    make_algebra,
     training_logpdf,
 )
 
 __all__ = [
     "Basis",
-    "CalibrationAlgebra",
-    "DenseCalibrationDensity",
     "GridData",
     "InputPCA",
-    "KronCalibrationDensity",
     "LogDensity",
     "Normaliser",
     "SeparableKernel",
@@ -54,7 +48,6 @@ __all__ = [
     "input_pca",
     "kron_training_basis",
     "kron_training_logpdf",
-    "make_algebra",
     "pca_basis",
     "rho_to_beta",
     "stack_outputs",

@@ -31,7 +31,8 @@ from bayescal.config import Study
 from bayescal.data.measured import MeasuredData, load_measured
 from bayescal.design import Design, Prior, latin_hypercube, prior_from_spec
 from bayescal.emulator.assemble import Assembled, assemble
-from bayescal.emulator.gp import Emulator, LooResult, train
+from bayescal.emulator.gp import Emulator, LooResult
+from bayescal.emulator.training import train
 from bayescal.errors import SimulatorError
 from bayescal.pipeline.predict import (
     Band,

@@ -29,15 +29,15 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from bayescal.calibration.chains import Chains
 from bayescal.errors import ConfigError
+from bayescal.mcmc.chains import Chains
 
 if TYPE_CHECKING:
     import pandas as pd
     from arviz import InferenceData
 
 
-def _arviz() -> ModuleType:
+def import_arviz() -> ModuleType:
     """Import ArviZ without its once-a-day notice about the coming 1.0 refactor.
 
     ArviZ 0.2x emits a ``FutureWarning`` on import that concerns its own API
@@ -142,7 +142,7 @@ def to_inference_data(
     Parameters
     ----------
     source
-        :class:`~bayescal.calibration.chains.Chains`, or draws
+        :class:`~bayescal.mcmc.chains.Chains`, or draws
         ``(n_chains, n_draws, d)``.
     names
         Parameter names (default: the chains' names, or ``x0, x1, ...``).
@@ -154,7 +154,7 @@ def to_inference_data(
         ``sample_stats.lp`` (the log-density) and the root seed in the attributes.
     """
     draws, names_t, _ = _as_array(source, names, None)
-    az = _arviz()
+    az = import_arviz()
     posterior = {name: draws[:, :, k] for k, name in enumerate(names_t)}
     if isinstance(source, Chains):
         return az.from_dict(
@@ -169,7 +169,7 @@ def _arviz_values(
     draws: NDArray[np.float64], names: tuple[str, ...]
 ) -> dict[str, NDArray[np.float64]]:
     """R-hat, ESS and MCSE per parameter (NaN for parameters that never move)."""
-    az = _arviz()
+    az = import_arviz()
     idata = to_inference_data(draws, names)
     calls = {
         "rhat": lambda: az.rhat(idata, method="rank"),
@@ -205,7 +205,7 @@ def diagnose(
     Parameters
     ----------
     source
-        :class:`~bayescal.calibration.chains.Chains`, or draws
+        :class:`~bayescal.mcmc.chains.Chains`, or draws
         ``(n_chains, n_draws, d)``.
     names
         Parameter names (default: the chains' names, or ``x0, x1, ...``).

@@ -1,6 +1,6 @@
 """Metropolis-within-Gibbs chains in lockstep: one batched log-density call per update.
 
-:class:`~bayescal.calibration.samplers.mwg.MetropolisWithinGibbs` runs one
+:class:`~bayescal.mcmc.samplers.mwg.MetropolisWithinGibbs` runs one
 chain at a time and calls the log-density once per coordinate update; at the
 paper's size (R = 30 runs x m* = 25 periods) one calibration evaluation costs
 about as much as the Python around it. Here all ``B`` chains of a run advance
@@ -8,31 +8,34 @@ together: for each coordinate update the ``B`` proposals go to the target in
 one call of a *batched* log-density ``f(X (B, d)) -> (B,)``.
 
 Each chain keeps the semantics of the serial sampler exactly: the same
-proposal scales, batches and adaptation rule (Roberts & Rosenthal 2009), the
-same bounded-coordinate maps, and its own generator consumed in the same
-order (per batch of iterations, ``standard_normal((size, n_active))`` then
-``random((size, n_active))``). Given a batched log-density that returns, row
-by row, the values the scalar one returns, chain ``k`` of a lockstep run is
-bit-identical to the serial run of chain ``k``. When the two differ by
+schedule of batches, adaptation and snapshots
+(:class:`~bayescal.mcmc.samplers.schedule.Schedule`, shared with the serial
+sampler), the same bounded-coordinate maps, and its own generator consumed in
+the same order (per batch of iterations, ``standard_normal((size, n_active))``
+then ``random((size, n_active))``). Given a batched log-density that returns,
+row by row, the values the scalar one returns, chain ``k`` of a lockstep run
+is bit-identical to the serial run of chain ``k``. When the two differ by
 rounding only (the calibration likelihood: ~1e-15 relative), the draws are
 still identical unless an acceptance test falls within that rounding of its
 threshold, and the stored log-densities agree to rounding.
 
 Targets. A plain batched log-density is called on all chains' points at
-every update. A target may instead offer the lockstep protocol
+every update. A target may instead follow the lockstep protocol
 (:class:`LockstepTarget`): ``start(X)`` at the starting points,
 ``propose(X, i)`` when ``X`` differs from the current points in coordinate
 ``i`` only, and ``commit(accept)`` with the chains that took their proposal;
 it can then keep each chain's current pieces and recompute only what
-coordinate ``i`` changes (:class:`BatchedPosterior` does, through
-:class:`~bayescal.emulator.kron_batch.BatchSession`), as the scalar
-likelihood's memos do for one chain.
+coordinate ``i`` changes, as the scalar likelihood's memos do for one chain.
+A scalar target offers its lockstep form through a ``lockstep()`` method
+(:class:`LockstepCapable`; the calibration posterior of eq. 16 does);
+:func:`as_lockstep` picks the best form of any target.
 
 A chain whose proposal overflows the sampling map (``OverflowError``, a
 rejection in the serial sampler) is evaluated at its current point and
 rejected.
 
-Checkpoints (``checkpoint=``) are not offered for lockstep runs.
+Checkpoints (``checkpoint=``) hold all chains in one snapshot: a killed
+lockstep run resumes with the draws of an uninterrupted one.
 """
 
 from __future__ import annotations
@@ -40,31 +43,44 @@ from __future__ import annotations
 import copy
 import math
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from bayescal.calibration.samplers.base import (
+from bayescal.errors import ConfigError
+from bayescal.mcmc.checkpoint import ChainCheckpoint
+from bayescal.mcmc.samplers.base import (
     Box,
     Callback,
     LogDensity,
     SamplerResult,
     ScalarMap,
-    adaptation_step,
     check_log_density,
     check_run_args,
     fixed_mask,
     initial_scales,
 )
-from bayescal.calibration.samplers.mwg import MetropolisWithinGibbs, _batch_sizes
-from bayescal.errors import ConfigError
+from bayescal.mcmc.samplers.mwg import MetropolisWithinGibbs
+from bayescal.mcmc.samplers.schedule import Schedule, fingerprint
+
+__all__ = [
+    "BatchLogDensity",
+    "LockstepCapable",
+    "LockstepTarget",
+    "RowLoop",
+    "Stateless",
+    "as_lockstep",
+    "run_lockstep",
+]
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
 BatchLogDensity = Callable[[FloatArray], FloatArray]
 """A batched log-density: points ``(B, d)`` on the original scale -> ``(B,)``."""
+
+_INF = math.inf
 
 
 @runtime_checkable
@@ -111,9 +127,6 @@ class Stateless:
         """Nothing to keep."""
 
 
-_INF = math.inf
-
-
 @dataclass(frozen=True)
 class RowLoop:
     """A batched log-density from a scalar one: one call per row (no speed-up there).
@@ -131,189 +144,31 @@ class RowLoop:
         return np.array([self.log_density(row.copy()) for row in points], dtype=float)
 
 
+@runtime_checkable
+class LockstepCapable(Protocol):
+    """A scalar log-density that offers its own lockstep form."""
+
+    def lockstep(self) -> LockstepTarget:
+        """A :class:`LockstepTarget` equal to this log-density row by row."""
+        ...
+
+
 def as_lockstep(log_density: Any) -> LockstepTarget:
     """The lockstep form of a log-density.
 
-    A :class:`LockstepTarget` as it is; a
-    :class:`~bayescal.calibration.posterior.CalibrationPosterior` wrapped in
-    :class:`BatchedPosterior`; an object with a ``batch`` method (points
-    ``(B, d)`` -> ``(B,)``) through that method; anything else looped over
-    rows (:class:`RowLoop`).
+    A :class:`LockstepTarget` as it is; a :class:`LockstepCapable` target's
+    own ``lockstep()``; an object with a ``batch`` method (points ``(B, d)``
+    -> ``(B,)``) through that method; a plain batched callable is not told
+    from a scalar one, so anything else is looped over rows (:class:`RowLoop`).
     """
     if isinstance(log_density, LockstepTarget):
         return log_density
-    from bayescal.calibration.posterior import CalibrationPosterior
-
-    if isinstance(log_density, CalibrationPosterior):
-        return BatchedPosterior(log_density)
+    if isinstance(log_density, LockstepCapable):
+        return log_density.lockstep()
     batch = getattr(log_density, "batch", None)
     if callable(batch):
         return Stateless(batch)
     return Stateless(RowLoop(log_density))
-
-
-class BatchedPosterior:
-    """Batched log posterior of eq. 16 at rows ``[u_1 .. u_t, lambda, lambda*]``.
-
-    Built from the public attributes of a
-    :class:`~bayescal.calibration.posterior.CalibrationPosterior` (``algebra``,
-    ``priors``, ``t``, ``lam_prior``, ``lam_star_prior``); equal to calling it
-    on each row, up to rounding. The likelihood goes through
-    ``algebra.logpdf_batch`` where the back end has it (Kronecker), else a loop.
-    Rows outside the prior support, and rows whose covariance is not positive
-    definite, get ``-inf``. As a :class:`LockstepTarget` it keeps a
-    :class:`~bayescal.emulator.kron_batch.BatchSession` of the chains' current
-    points where the back end offers one (``algebra.batch_session``).
-
-    Parameters
-    ----------
-    target
-        The scalar posterior.
-    """
-
-    def __init__(self, target: Any) -> None:
-        from bayescal.design import UniformPrior
-
-        self.target = target
-        self.t = int(target.t)
-        gammas = (target.lam_prior, target.lam_star_prior)
-        self.shape_m1 = np.array([float(g[0]) - 1.0 for g in gammas])
-        self.rate = np.array([float(g[1]) for g in gammas])
-        priors = list(target.priors)
-        self.uniform = [k for k, p in enumerate(priors) if type(p) is UniformPrior]
-        self.other = [(k, p) for k, p in enumerate(priors) if type(p) is not UniformPrior]
-        self._session: Any = None
-        self._precisions = np.zeros((0, 2))
-        self._pending: tuple[int, FloatArray, FloatArray, BoolArray, FloatArray] | None = None
-        self._prior_terms = np.zeros((0, self.t + 2))
-
-    def prior_term(self, column: FloatArray, k: int) -> FloatArray:
-        """Log prior of coordinate ``k`` at the values ``column`` ``(B,)``."""
-        t = self.t
-        if k >= t:
-            shape_m1, rate = float(self.shape_m1[k - t]), float(self.rate[k - t])
-            if column.min() > 0.0:
-                out: FloatArray = shape_m1 * np.log(column) - rate * column
-                return out
-            return _log_gamma(column, shape_m1, rate)
-        if k in self.uniform:
-            if column.min() >= 0.0 and column.max() <= 1.0:
-                return np.zeros(column.shape)
-            return np.where((column >= 0.0) & (column <= 1.0), 0.0, -_INF)
-        return np.asarray(self.target.priors[k].logpdf_unit(column), dtype=float)
-
-    def start(self, points: FloatArray) -> FloatArray:
-        """Log posterior at the starting points; they become the current points."""
-        arr = np.array(points, dtype=float)
-        t = self.t
-        prior = self.log_prior(arr)
-        make = getattr(self.target.algebra, "batch_session", None)
-        self._session = None
-        if make is not None and np.all(prior > -_INF):
-            self._session = make(arr[:, :t], arr[:, t], arr[:, t + 1])
-        if self._session is None:
-            return self(arr)
-        self._precisions = arr[:, t : t + 2].copy()
-        self._prior_terms = np.column_stack([self.prior_term(arr[:, k], k) for k in range(t + 2)])
-        out: FloatArray = prior + np.where(self._session.ok, self._session.values, -_INF)
-        return out
-
-    def propose(self, points: FloatArray, coordinate: int) -> FloatArray:
-        """Log posterior with ``coordinate`` of the current points replaced."""
-        session, t = self._session, self.t
-        if session is None:
-            return self(points)
-        terms = self._prior_terms.copy()
-        terms[:, coordinate] = self.prior_term(points[:, coordinate], coordinate)
-        prior = terms.sum(axis=1)
-        if coordinate < t:
-            moved = points[:, :t]
-            values, ok = session.propose_theta(moved)
-        else:
-            # Rows outside the prior are evaluated at their current precision (-inf anyway).
-            column = points[:, coordinate]
-            moved = np.where(column > 0.0, column, self._precisions[:, coordinate - t])
-            move = session.propose_lam if coordinate == t else session.propose_lam_star
-            values, ok = move(moved)
-        self._pending = (coordinate, moved, values, ok, terms)
-        out: FloatArray = prior + np.where(ok, values, -_INF)
-        return out
-
-    def commit(self, accept: BoolArray) -> None:
-        """Take over the accepted rows of the last proposal."""
-        if self._session is None or self._pending is None:
-            return
-        coordinate, moved, values, ok, terms = self._pending
-        self._pending = None
-        self._session.commit(accept, values, ok)
-        self._prior_terms[accept] = terms[accept]
-        if coordinate >= self.t:
-            column = self._precisions[:, coordinate - self.t]
-            column[accept] = moved[accept]
-
-    def log_prior(self, points: FloatArray) -> FloatArray:
-        """Log prior density per row ``(B,)`` (up to a constant)."""
-        t = self.t
-        prec = points[:, t : t + 2]
-        if prec.min() > 0.0:
-            total = (self.shape_m1 * np.log(prec) - self.rate * prec).sum(axis=1)
-        else:
-            total = _log_gamma(prec[:, 0], self.shape_m1[0], self.rate[0])
-            total += _log_gamma(prec[:, 1], self.shape_m1[1], self.rate[1])
-        if self.uniform:
-            u = points[:, self.uniform]
-            inside = ((u >= 0.0) & (u <= 1.0)).all(axis=1)
-            if not inside.all():
-                total[~inside] = -_INF
-        for k, prior in self.other:
-            total += np.asarray(prior.logpdf_unit(points[:, k]), dtype=float)
-        return total
-
-    def __call__(self, points: FloatArray) -> FloatArray:
-        """Log posterior per row of ``points`` ``(B, t + 2)``."""
-        arr = np.asarray(points, dtype=float)
-        prior = self.log_prior(arr)
-        inside = prior > -_INF
-        lik = np.full(arr.shape[0], -_INF)
-        if inside.any():
-            rows = arr if inside.all() else arr[inside]
-            lik[inside] = self._likelihood(rows)
-        return prior + lik
-
-    def _likelihood(self, rows: FloatArray) -> FloatArray:
-        t = self.t
-        algebra = self.target.algebra
-        if hasattr(algebra, "logpdf_batch"):
-            out: FloatArray = algebra.logpdf_batch(
-                rows[:, :t], rows[:, t], rows[:, t + 1], errors="-inf"
-            )
-            return out
-        values = np.empty(rows.shape[0])
-        for n, row in enumerate(rows):
-            try:
-                values[n] = algebra.logpdf(row[:t], float(row[t]), float(row[t + 1]))
-            except np.linalg.LinAlgError:
-                values[n] = -_INF
-        return values
-
-
-def _log_gamma(value: FloatArray, shape_m1: float, rate: float) -> FloatArray:
-    """``(shape - 1) log x - rate x`` for ``x > 0``, ``-inf`` elsewhere."""
-    positive = value > 0.0
-    safe = np.where(positive, value, 1.0)
-    return np.where(positive, shape_m1 * np.log(safe) - rate * safe, -_INF)
-
-
-@dataclass
-class _States:
-    """All chains' states between blocks (mutated by the loop); rows are chains."""
-
-    x: FloatArray  # (B, d) original scale
-    z: FloatArray  # (B, d) sampling scale
-    log_jac: FloatArray  # (B, d)
-    lp: FloatArray  # (B,)
-    scale: FloatArray  # (B, d)
-    accepted: NDArray[np.int64]  # (B, d)
 
 
 def run_lockstep(
@@ -323,6 +178,7 @@ def run_lockstep(
     n_draws: int,
     rngs: Sequence[np.random.Generator],
     callback: Callback | None = None,
+    checkpoint: ChainCheckpoint | None = None,
 ) -> list[SamplerResult]:
     """Run one chain per generator in lockstep (see the module docstring).
 
@@ -343,6 +199,10 @@ def run_lockstep(
     callback
         Called after each sweep with the iterations completed over all chains
         (the total is ``B * (n_burn + n_draws * thin)``).
+    checkpoint
+        Where to keep one snapshot of all chains between batches; a matching
+        snapshot found there at the start is resumed (same draws as an
+        uninterrupted run).
 
     Returns
     -------
@@ -362,31 +222,76 @@ def run_lockstep(
     for row in x:
         box.check_start(row)
     active = np.flatnonzero(~fixed_mask(sampler.fixed, x.shape[1])).tolist()
-    state = _initial_states(sampler, target, x, box)
-    loop = _Lockstep(target, [box.scalar_map(i) for i in range(x.shape[1])], active, box)
-    burn = _batch_sizes(sampler.n_burn, sampler.batch_size)
-    batches = burn + _batch_sizes(n_draws * sampler.thin, sampler.batch_size)
-    draws = np.empty((x.shape[0], n_draws, x.shape[1]))
-    lps = np.empty((x.shape[0], n_draws))
-    n_done, n_kept = 0, 0
-    for index, size in enumerate(batches):
-        if index < len(burn):
-            state.accepted[:] = 0
-            loop.block(state, rngs, size, n_done, callback)
-            _adapt(sampler, state, size, active, index + 1)
-            if index == len(burn) - 1:
-                state.accepted[:] = 0
-        else:
-            if index == 0:
-                state.accepted[:] = 0
-            kept = loop.block(
-                state, rngs, size, n_done, callback, sampler.thin, keep_start=sampler.n_burn
-            )
-            for xs, lp in kept:
-                draws[:, n_kept], lps[:, n_kept] = xs, lp
-                n_kept += 1
-        n_done += size
-    return _results(sampler, state, draws, lps, active, n_draws, rng_states)
+    maps = [box.scalar_map(i) for i in range(x.shape[1])]
+    chains = _Chains(sampler, _Lockstep(target, maps, active, box), list(rngs), callback)
+
+    def start() -> None:
+        chains.s = _initial_states(sampler, target, x, box)
+
+    schedule = Schedule(sampler.n_burn, n_draws, sampler.thin, sampler.batch_size)
+    fp = fingerprint(sampler, x, n_draws, rng_states)
+    draws, lps = schedule.run(chains, start, checkpoint, fp, x.shape)
+    return _results(sampler, chains.s, draws, lps, active, n_draws, rng_states)
+
+
+@dataclass
+class _States:
+    """All chains' states between blocks (mutated by the loop); rows are chains."""
+
+    x: FloatArray  # (B, d) original scale
+    z: FloatArray  # (B, d) sampling scale
+    log_jac: FloatArray  # (B, d)
+    lp: FloatArray  # (B,)
+    scale: FloatArray  # (B, d)
+    accepted: NDArray[np.int64]  # (B, d)
+
+
+@dataclass
+class _Chains:
+    """All chains as the :class:`~bayescal.mcmc.samplers.schedule.ChainSet` of the schedule."""
+
+    sampler: MetropolisWithinGibbs
+    loop: _Lockstep
+    rngs: list[np.random.Generator]
+    callback: Callback | None
+    s: _States = field(init=False)
+
+    def block(
+        self, size: int, n_done: int, keep_every: int, keep_start: int
+    ) -> list[tuple[FloatArray, FloatArray]]:
+        return self.loop.block(
+            self.s, self.rngs, size, n_done, self.callback, keep_every, keep_start
+        )
+
+    def reset_counts(self) -> None:
+        self.s.accepted[:] = 0
+
+    def adapt(self, size: int, n_batch: int) -> None:
+        """Per chain and coordinate, the serial sampler's rule (same float operations)."""
+        factor_up, factor_down = self.sampler.adaptation(n_batch)
+        active = self.loop.active
+        up = self.s.accepted[:, active] > self.sampler.target * size
+        self.s.scale[:, active] *= np.where(up, factor_up, factor_down)
+
+    def state(self) -> tuple[dict[str, Any], dict[str, Any]]:
+        s = self.s
+        arrays: dict[str, Any] = {"x": s.x, "z": s.z, "log_jac": s.log_jac, "scale": s.scale}
+        arrays |= {"accepted": s.accepted, "lp": s.lp}
+        return arrays, {"rng": [rng.bit_generator.state for rng in self.rngs]}
+
+    def restore(self, arrays: dict[str, np.ndarray], meta: dict[str, Any]) -> None:
+        for rng, state in zip(self.rngs, meta["rng"], strict=True):
+            rng.bit_generator.state = state
+        x = np.array(arrays["x"], dtype=float)
+        self.loop.target.start(x.copy())  # the target's current points, for propose()
+        self.s = _States(
+            x=x,
+            z=np.array(arrays["z"], dtype=float),
+            log_jac=np.array(arrays["log_jac"], dtype=float),
+            lp=np.array(arrays["lp"], dtype=float),
+            scale=np.array(arrays["scale"], dtype=float),
+            accepted=np.array(arrays["accepted"], dtype=np.int64),
+        )
 
 
 def _initial_states(
@@ -410,17 +315,7 @@ def _initial_states(
                 log_jac[:, i] = [f(float(v))[1] for v in z[:, i]]
     scale = np.tile(initial_scales(sampler.scales, box), (x.shape[0], 1))
     accepted = np.zeros(x.shape, dtype=np.int64)
-    return _States(x, z, log_jac, lp, scale, accepted)
-
-
-def _adapt(
-    sampler: MetropolisWithinGibbs, s: _States, size: int, active: list[int], n_batch: int
-) -> None:
-    """Per chain and coordinate, the serial sampler's rule (same float operations)."""
-    step = adaptation_step(n_batch, sampler.max_adapt)
-    factor_up, factor_down = math.exp(step), math.exp(-step)
-    up = s.accepted[:, active] > sampler.target * size
-    s.scale[:, active] *= np.where(up, factor_up, factor_down)
+    return _States(x.copy(), z, log_jac, lp, scale, accepted)
 
 
 def _results(
@@ -432,6 +327,7 @@ def _results(
     n_draws: int,
     rng_states: list[Any],
 ) -> list[SamplerResult]:
+    """One :class:`SamplerResult` per chain from the ``(n_draws, B, ...)`` arrays."""
     results = []
     d = s.x.shape[1]
     for k in range(s.x.shape[0]):
@@ -441,8 +337,8 @@ def _results(
         scales[active] = s.scale[k, active]
         results.append(
             SamplerResult(
-                draws=draws[k].copy(),
-                log_density=lps[k].copy(),
+                draws=draws[:, k].copy(),
+                log_density=lps[:, k].copy(),
                 acceptance=acceptance,
                 scales=scales,
                 rng_state=rng_states[k],

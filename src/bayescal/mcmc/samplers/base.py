@@ -16,7 +16,7 @@ Contract for the log-density
   if you keep it.
 * ``-inf`` rejects the point. ``NaN`` and ``+inf`` are errors
   (:class:`LogDensityError`), never silently rejected.
-* For :mod:`bayescal.calibration.chains` with processes it must be picklable
+* For :mod:`bayescal.mcmc.chains` with processes it must be picklable
   (a module-level function or an instance of a module-level class).
 
 Bounded coordinates

@@ -1,6 +1,6 @@
 """Checkpoints of a running chain, so that a killed MCMC resumes bit for bit.
 
-A sampler that supports checkpoints (:class:`~bayescal.calibration.samplers.mwg.
+A sampler that supports checkpoints (:class:`~bayescal.mcmc.samplers.mwg.
 MetropolisWithinGibbs`) calls :meth:`ChainCheckpoint.save` between batches of
 iterations with everything its loop needs to continue: the state, the
 adapted proposal widths, the draws kept so far and the random generator's

@@ -15,7 +15,7 @@ MCMC", J. Comput. Graph. Stat. 18(2), 349-367; J. S. Rosenthal (2007),
 "AMCMC: An R interface for adaptive MCMC", Comput. Stat. Data Anal. 51.
 
 Bounded coordinates are sampled on a transformed scale or reflected at the
-bounds (see :mod:`bayescal.calibration.samplers.base`); ``fixed`` coordinates
+bounds (see :mod:`bayescal.mcmc.samplers.base`); ``fixed`` coordinates
 keep their starting value.
 
 Why no "only coordinate i moved" hook: each update already costs exactly one
@@ -28,18 +28,17 @@ sampled as separate targets.
 from __future__ import annotations
 
 import copy
-import hashlib
-import json
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from bayescal.calibration.checkpoint import ChainCheckpoint
-from bayescal.calibration.samplers.base import (
+from bayescal.errors import ConfigError
+from bayescal.mcmc.checkpoint import ChainCheckpoint
+from bayescal.mcmc.samplers.base import (
     BoundsMethod,
     Box,
     Callback,
@@ -52,7 +51,7 @@ from bayescal.calibration.samplers.base import (
     fixed_mask,
     initial_scales,
 )
-from bayescal.errors import ConfigError
+from bayescal.mcmc.samplers.schedule import Schedule, fingerprint
 
 _INF = math.inf
 
@@ -158,44 +157,24 @@ class MetropolisWithinGibbs:
         box.check_start(x)
         active = np.flatnonzero(~fixed_mask(self.fixed, x.size)).tolist()
         maps = [box.scalar_map(i) for i in range(x.size)]
-        loop = _Loop(log_density, maps, active, box.transforms, callback)
-        burn = _batch_sizes(self.n_burn, self.batch_size)
-        batches = burn + _batch_sizes(n_draws * self.thin, self.batch_size)
-        fingerprint = _fingerprint(self, x, n_draws, rng_state)
-        draws: list[NDArray[np.float64]] = []
-        lps: list[float] = []
-        resumed = None if checkpoint is None else checkpoint.load(fingerprint)
-        if resumed is None:
-            state = self._initial_state(log_density, x, box)
-            first, n_done = 0, 0
-        else:
-            state, first, n_done = _restore(resumed, rng, draws, lps)
-        for index in range(first, len(batches)):
-            size = batches[index]
-            if index < len(burn):
-                counts = [0] * x.size
-                state.accepted = counts
-                loop.block(state, rng, size, n_done, keep_every=0)
-                self._adapt(state, counts, size, active, index + 1)
-                if index == len(burn) - 1:
-                    state.accepted = [0] * x.size
-            else:
-                if index == 0:
-                    state.accepted = [0] * x.size
-                kept = loop.block(state, rng, size, n_done, self.thin, keep_start=self.n_burn)
-                draws.extend(k[0] for k in kept)
-                lps.extend(k[1] for k in kept)
-            n_done += size
-            if checkpoint is not None and (checkpoint.due() or index == len(batches) - 1):
-                _snapshot(checkpoint, fingerprint, state, index + 1, n_done, draws, lps, rng)
+        chain = _Chain(
+            self, _Loop(log_density, maps, active, box.transforms, callback), rng, active
+        )
+        fp = fingerprint(self, x, n_draws, rng_state)
 
+        def start() -> None:
+            chain.s = self._initial_state(log_density, x, box)
+
+        schedule = Schedule(self.n_burn, n_draws, self.thin, self.batch_size)
+        draws, lps = schedule.run(chain, start, checkpoint, fp, (x.size,))
+        state = chain.s
         acceptance = np.full(x.size, np.nan)
         acceptance[active] = np.asarray(state.accepted, dtype=float)[active] / (n_draws * self.thin)
         scales = np.zeros(x.size)
         scales[active] = np.asarray(state.scale)[active]
         return SamplerResult(
-            draws=np.array(draws).reshape(n_draws, x.size),
-            log_density=np.asarray(lps, dtype=float),
+            draws=draws,
+            log_density=lps,
             acceptance=acceptance,
             scales=scales,
             rng_state=rng_state,
@@ -218,80 +197,57 @@ class MetropolisWithinGibbs:
                 log_jac[i] = f(float(z[i]))[1]
         return _State(x, z.tolist(), log_jac, lp, initial_scales(self.scales, box).tolist(), [])
 
-    def _adapt(
-        self, state: _State, counts: list[int], size: int, active: list[int], n_batch: int
-    ) -> None:
+    def adaptation(self, n_batch: int) -> tuple[float, float]:
+        """Factors ``(up, down)`` of a proposal width after burn-in batch ``n_batch``."""
         step = adaptation_step(n_batch, self.max_adapt)
-        factor_up, factor_down = math.exp(step), math.exp(-step)
-        for i in active:
-            state.scale[i] *= factor_up if counts[i] > self.target * size else factor_down
+        return math.exp(step), math.exp(-step)
 
 
-def _fingerprint(
-    sampler: MetropolisWithinGibbs, x0: NDArray[np.float64], n_draws: int, rng_state: Any
-) -> str:
-    """What a snapshot must match to be resumed: settings, start and seed."""
-    text = json.dumps([repr(sampler), x0.tolist(), n_draws, rng_state], default=str)
-    return hashlib.sha256(text.encode()).hexdigest()
+@dataclass
+class _Chain:
+    """One chain as the :class:`~bayescal.mcmc.samplers.schedule.ChainSet` of the schedule."""
 
+    sampler: MetropolisWithinGibbs
+    loop: _Loop
+    rng: np.random.Generator
+    active: list[int]
+    s: _State = field(init=False)
 
-def _snapshot(
-    checkpoint: ChainCheckpoint,
-    fingerprint: str,
-    state: _State,
-    next_batch: int,
-    n_done: int,
-    draws: list[NDArray[np.float64]],
-    lps: list[float],
-    rng: np.random.Generator,
-) -> None:
-    d = state.x.size
-    arrays = {
-        "x": state.x,
-        "z": np.asarray(state.z, dtype=float),
-        "log_jac": np.asarray(state.log_jac, dtype=float),
-        "scale": np.asarray(state.scale, dtype=float),
-        "accepted": np.asarray(state.accepted, dtype=np.int64),
-        "draws": np.array(draws, dtype=float).reshape(len(draws), d),
-        "lps": np.asarray(lps, dtype=float),
-    }
-    meta = {
-        "fingerprint": fingerprint,
-        "next_batch": next_batch,
-        "n_done": n_done,
-        "lp": state.lp,
-        "rng": rng.bit_generator.state,
-    }
-    checkpoint.save(arrays, meta)
+    def block(
+        self, size: int, n_done: int, keep_every: int, keep_start: int
+    ) -> list[tuple[NDArray[np.float64], float]]:
+        return self.loop.block(self.s, self.rng, size, n_done, keep_every, keep_start)
 
+    def reset_counts(self) -> None:
+        self.s.accepted = [0] * self.s.x.size
 
-def _restore(
-    snapshot: tuple[dict[str, np.ndarray], dict[str, Any]],
-    rng: np.random.Generator,
-    draws: list[NDArray[np.float64]],
-    lps: list[float],
-) -> tuple[_State, int, int]:
-    arrays, meta = snapshot
-    rng.bit_generator.state = meta["rng"]
-    draws.extend(np.array(row, dtype=float) for row in arrays["draws"])
-    lps.extend(float(v) for v in arrays["lps"])
-    state = _State(
-        x=np.array(arrays["x"], dtype=float),
-        z=arrays["z"].tolist(),
-        log_jac=arrays["log_jac"].tolist(),
-        lp=float(meta["lp"]),
-        scale=arrays["scale"].tolist(),
-        accepted=[int(v) for v in arrays["accepted"]],
-    )
-    return state, int(meta["next_batch"]), int(meta["n_done"])
+    def adapt(self, size: int, n_batch: int) -> None:
+        factor_up, factor_down = self.sampler.adaptation(n_batch)
+        scale, counts, target = self.s.scale, self.s.accepted, self.sampler.target
+        for i in self.active:
+            scale[i] *= factor_up if counts[i] > target * size else factor_down
 
+    def state(self) -> tuple[dict[str, Any], dict[str, Any]]:
+        s = self.s
+        arrays = {
+            "x": s.x,
+            "z": np.asarray(s.z, dtype=float),
+            "log_jac": np.asarray(s.log_jac, dtype=float),
+            "scale": np.asarray(s.scale, dtype=float),
+            "accepted": np.asarray(s.accepted, dtype=np.int64),
+        }
+        return arrays, {"lp": s.lp, "rng": self.rng.bit_generator.state}
 
-def _batch_sizes(total: int, batch: int) -> list[int]:
-    """Split ``total`` iterations into batches of ``batch`` (the last may be shorter)."""
-    sizes = [batch] * (total // batch)
-    if total % batch:
-        sizes.append(total % batch)
-    return sizes
+    def restore(self, arrays: dict[str, np.ndarray], meta: dict[str, Any]) -> None:
+        self.rng.bit_generator.state = meta["rng"]
+        self.s = _State(
+            x=np.array(arrays["x"], dtype=float),
+            z=arrays["z"].tolist(),
+            log_jac=arrays["log_jac"].tolist(),
+            lp=float(meta["lp"]),
+            scale=arrays["scale"].tolist(),
+            accepted=[int(v) for v in arrays["accepted"]],
+        )
 
 
 @dataclass(frozen=True)

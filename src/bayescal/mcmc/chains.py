@@ -9,9 +9,10 @@ functions or instances of module-level classes.
 
 Backend ``"vectorised"`` (Metropolis-within-Gibbs only) runs all chains in
 this process in lockstep, one batched log-density call per coordinate update
-(:mod:`bayescal.calibration.samplers.mwg_batch`); each chain consumes its
+(:mod:`bayescal.mcmc.samplers.lockstep`); each chain consumes its
 generator as the serial sampler does, so its draws equal the serial ones
 (bit for bit when the batched log-density equals the scalar one row by row).
+Its checkpoint is one snapshot of all chains (``lockstep.npz``).
 """
 
 from __future__ import annotations
@@ -28,11 +29,11 @@ from typing import Any, Literal, get_args
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from bayescal.calibration.checkpoint import ChainCheckpoint
-from bayescal.calibration.samplers.base import Callback, LogDensity, Sampler, SamplerResult
-from bayescal.calibration.samplers.mwg import MetropolisWithinGibbs
-from bayescal.calibration.samplers.mwg_batch import as_lockstep, run_lockstep
 from bayescal.errors import ConfigError
+from bayescal.mcmc.checkpoint import ChainCheckpoint
+from bayescal.mcmc.samplers.base import Callback, LogDensity, Sampler, SamplerResult
+from bayescal.mcmc.samplers.lockstep import as_lockstep, run_lockstep
+from bayescal.mcmc.samplers.mwg import MetropolisWithinGibbs
 
 StartFunction = Callable[[np.random.Generator], ArrayLike]
 """Draws a starting point (d,) with the chain's own generator."""
@@ -93,6 +94,9 @@ def dispersed_starts(
     Coordinates bounded on both sides are drawn from a Latin hypercube over
     the middle 90 % of the interval (one stratum per chain); the others from
     ``center + spread * N(0, 1)``, folded to the bounded side if one bound exists.
+    With every coordinate bounded on both sides only the strata are drawn
+    (``2 d n_chains`` uniform numbers), so a caller may go on drawing other
+    quantities from ``rng`` (the calibration's precisions).
 
     Parameters
     ----------
@@ -115,6 +119,9 @@ def dispersed_starts(
     ) / n_chains
     width = np.where(both, hi - lo, 0.0)
     starts = np.where(both, lo, 0.0) + width * (0.05 + 0.9 * strata)
+    if both.all():  # nothing else to draw: the generator is left where the strata left it
+        out_box: NDArray[np.float64] = starts
+        return out_box
     c = np.zeros(d) if center is None else np.broadcast_to(np.asarray(center, float), (d,))
     c = np.where(np.isfinite(lo) & ~both & (c <= lo), lo + 1.0, c)
     c = np.where(np.isfinite(hi) & ~both & (c >= hi), hi - 1.0, c)
@@ -134,21 +141,20 @@ def run_chains(
     seed: int,
     n_chains: int | None = None,
     names: Sequence[str] | None = None,
-    parallel: bool = True,
+    backend: ChainBackend = "processes",
     max_workers: int | None = None,
     callback: Callback | None = None,
     checkpoint_dir: str | os.PathLike[str] | None = None,
     checkpoint_seconds: float = 30.0,
-    backend: ChainBackend | None = None,
 ) -> Chains:
     """Run ``n_chains`` chains of ``sampler`` and collect them.
 
     Parameters
     ----------
     sampler
-        Any :class:`~bayescal.calibration.samplers.base.Sampler`.
+        Any :class:`~bayescal.mcmc.samplers.base.Sampler`.
     log_density
-        The target (picklable when ``parallel``).
+        The target (picklable for the ``"processes"`` backend).
     starts
         Starting points ``(n_chains, d)``, or a function drawing one from the
         chain's generator (see :func:`dispersed_starts`).
@@ -161,9 +167,13 @@ def run_chains(
         number of rows of ``starts``, or 4 with a start function.
     names
         Parameter names; default ``x0, x1, ...``.
-    parallel
-        Run the chains in worker processes (``ProcessPoolExecutor``); ignored
-        when ``backend`` is given.
+    backend
+        ``"processes"`` (each chain in a worker process, ``ProcessPoolExecutor``;
+        one chain runs here), ``"serial"`` (one after another here) or
+        ``"vectorised"`` (all chains in lockstep here, batched log-density
+        calls; Metropolis-within-Gibbs only); the log-density's batched form is
+        chosen by :func:`~bayescal.mcmc.samplers.lockstep.as_lockstep` (the
+        calibration posterior offers the batched Kronecker likelihood).
     max_workers
         Worker processes; default ``min(n_chains, os.cpu_count())``.
     callback
@@ -171,33 +181,30 @@ def run_chains(
         (the total is ``n_chains * (n_burn + n_draws * thin)``); from worker
         processes the count arrives in steps of about 1 % per chain.
     checkpoint_dir
-        Folder for one snapshot per chain (``chain-<k>.npz``), written between
+        Folder for one snapshot per chain (``chain-<k>.npz``; one
+        ``lockstep.npz`` for all chains with ``"vectorised"``), written between
         batches at most every ``checkpoint_seconds``; matching snapshots found
         there are resumed, so a killed run continues with identical draws. The
         sampler must accept ``checkpoint=`` (Metropolis-within-Gibbs does).
     checkpoint_seconds
         Minimum wall time between two snapshots of a chain. [s]
-    backend
-        ``"processes"``, ``"serial"`` or ``"vectorised"`` (all chains in lockstep
-        in this process, batched log-density calls; Metropolis-within-Gibbs
-        only, no checkpoints); the log-density's batched form is chosen by
-        :func:`~bayescal.calibration.samplers.mwg_batch.as_lockstep` (a
-        calibration posterior gets the batched Kronecker likelihood). Default: from ``parallel``.
 
     Returns
     -------
     Chains
     """
-    mode = _backend(backend, parallel, sampler, checkpoint_dir)
+    mode = _backend(backend, sampler)
     start_list = _start_list(starts, n_chains)
     n_chains = len(start_list)
     children = np.random.SeedSequence(seed).spawn(n_chains)
     if mode == "vectorised":
-        return _named(
-            _run_vectorised(sampler, log_density, start_list, n_draws, children, callback),
-            names,
-            seed,
+        snapshot = None
+        if checkpoint_dir is not None:
+            snapshot = ChainCheckpoint(Path(checkpoint_dir) / "lockstep.npz", checkpoint_seconds)
+        results = _run_vectorised(
+            sampler, log_density, start_list, n_draws, children, callback, snapshot
         )
+        return _named(results, names, seed)
     checkpoints: list[ChainCheckpoint | None] = [
         None
         if checkpoint_dir is None
@@ -213,7 +220,7 @@ def run_chains(
         results = []
         for k, child in enumerate(children):
             offset = k * _iterations(sampler, n_draws)
-            report = None if callback is None else _Offset(callback, offset)
+            report = None if callback is None else Offset(callback, offset)
             results.append(
                 _run_one(
                     sampler, log_density, start_list[k], n_draws, child, report, checkpoints[k]
@@ -230,29 +237,16 @@ def _named(results: Sequence[SamplerResult], names: Sequence[str] | None, seed: 
     return Chains(tuple(results), chain_names, int(seed))
 
 
-def _backend(
-    backend: str | None,
-    parallel: bool,
-    sampler: Sampler,
-    checkpoint_dir: str | os.PathLike[str] | None,
-) -> str:
-    mode = ("processes" if parallel else "serial") if backend is None else backend
-    if mode not in BACKENDS:
+def _backend(backend: str, sampler: Sampler) -> str:
+    if backend not in BACKENDS:
         raise ConfigError(f"chain backend must be one of {list(BACKENDS)}, got {backend!r}")
-    if mode == "vectorised":
-        if not isinstance(sampler, MetropolisWithinGibbs):
-            raise ConfigError(
-                f"backend 'vectorised' needs a MetropolisWithinGibbs sampler, "
-                f"got {type(sampler).__name__}",
-                hint="use backend 'serial' or 'processes' for this sampler",
-            )
-        if checkpoint_dir is not None:
-            raise ConfigError(
-                "backend 'vectorised' does not write checkpoints, got checkpoint_dir="
-                f"{str(checkpoint_dir)!r}",
-                hint="drop checkpoint_dir or use backend 'serial' or 'processes'",
-            )
-    return mode
+    if backend == "vectorised" and not isinstance(sampler, MetropolisWithinGibbs):
+        raise ConfigError(
+            f"backend 'vectorised' needs a MetropolisWithinGibbs sampler, "
+            f"got {type(sampler).__name__}",
+            hint="use backend 'serial' or 'processes' for this sampler",
+        )
+    return backend
 
 
 def _run_vectorised(
@@ -262,6 +256,7 @@ def _run_vectorised(
     n_draws: int,
     children: list[np.random.SeedSequence],
     callback: Callback | None,
+    checkpoint: ChainCheckpoint | None,
 ) -> list[SamplerResult]:
     """All chains in lockstep; chain ``k`` draws its start from its own generator first."""
     assert isinstance(sampler, MetropolisWithinGibbs)  # checked by _backend
@@ -272,7 +267,7 @@ def _run_vectorised(
             for s, rng in zip(starts, rngs, strict=True)
         ]
     )
-    return run_lockstep(sampler, as_lockstep(log_density), x0, n_draws, rngs, callback)
+    return run_lockstep(sampler, as_lockstep(log_density), x0, n_draws, rngs, callback, checkpoint)
 
 
 def _start_list(starts: ArrayLike | StartFunction, n_chains: int | None) -> list[Any]:
@@ -298,7 +293,7 @@ def _check_picklable(*objects: object) -> None:
             raise ConfigError(
                 f"cannot send {type(obj).__name__} {obj!r:.60} to worker processes: {exc}",
                 hint="define it at module level (no lambdas or local functions), "
-                "or run the chains with parallel=False",
+                "or run the chains with backend='serial'",
             ) from exc
 
 
@@ -327,8 +322,8 @@ def _run_one(
 
 
 @dataclass(frozen=True)
-class _Offset:
-    """Serial progress: add the iterations of the chains already done."""
+class Offset:
+    """Progress of one part reported as progress of the whole: adds ``offset``."""
 
     callback: Callback
     offset: int

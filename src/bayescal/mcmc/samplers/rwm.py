@@ -30,7 +30,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from bayescal.calibration.samplers.base import (
+from bayescal.errors import ConfigError
+from bayescal.mcmc.samplers.base import (
     BoundsMethod,
     Box,
     Callback,
@@ -42,7 +43,6 @@ from bayescal.calibration.samplers.base import (
     fixed_mask,
     initial_scales,
 )
-from bayescal.errors import ConfigError
 
 _INF = math.inf
 
@@ -91,7 +91,7 @@ class AdaptiveMetropolis:
         Bounds per coordinate on the original scale (``None``/``inf`` for none).
     bounds
         ``"transform"`` (default) or ``"reflect"`` (see
-        :mod:`bayescal.calibration.samplers.base`).
+        :mod:`bayescal.mcmc.samplers.base`).
     fixed
         Boolean mask (d,) or indices of coordinates that keep their start value.
     scales

@@ -1,0 +1,117 @@
+"""Dense reference of the calibration likelihood (eqs. 12, 14): the whole covariance by Cholesky.
+
+``O((R m* + m_obs)^3)`` per evaluation: the reference that
+:class:`bayescal.calibration.kron.KronCalibrationDensity` is tested against,
+for small problems only (see :mod:`bayescal.emulator.dense`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from bayescal.calibration.batch import BatchErrors, check_batch_args, logpdf_loop
+from bayescal.emulator.dense import GridData, broadcast_obs_nuggets, dense_logpdf
+from bayescal.emulator.kernel import FloatArray, LogDensity, SeparableKernel
+
+__all__ = ["DenseCalibrationDensity"]
+
+
+class DenseCalibrationDensity:
+    """Calibration log-density (eq. 12) by dense Cholesky: the reference.
+
+    Same interface as :class:`bayescal.calibration.kron.KronCalibrationDensity`.
+    Nothing is precomputed: each call builds and factorises every ``Omega_j``.
+
+    Parameters
+    ----------
+    theta, x, kernels, ktk, w, w_star, obs_index
+        As :class:`GridData`; ``w_star`` is required.
+    """
+
+    def __init__(
+        self,
+        theta: ArrayLike,
+        x: ArrayLike,
+        kernels: Sequence[SeparableKernel],
+        ktk: ArrayLike,
+        w: ArrayLike,
+        w_star: ArrayLike,
+        obs_index: ArrayLike | None = None,
+    ) -> None:
+        self._data = GridData.build(theta, x, kernels, ktk, w, w_star, obs_index)
+
+    @property
+    def data(self) -> GridData:
+        """The validated fixed inputs."""
+        return self._data
+
+    def with_observations(self, w_star: ArrayLike) -> DenseCalibrationDensity:
+        """A new density with other observed weights (e.g. re-estimated by eq. 20)."""
+        d = self._data
+        return type(self)(d.theta, d.x, d.kernels, d.ktk, d.w, w_star, d.obs_index)
+
+    def pieces_nuggets(self, theta_star: ArrayLike, a: ArrayLike, a_star: ArrayLike) -> LogDensity:
+        """Log-density summed over bases for explicit nuggets.
+
+        Parameters
+        ----------
+        theta_star
+            Calibration parameters ``(t,)``, scaled to [0, 1]. [-]
+        a
+            Simulator nuggets, shape ``(p,)``. [-]
+        a_star
+            Observation nuggets, shape ``(p,)`` or ``(p, m_obs)``. [-]
+        """
+        d = self._data
+        if d.w_star is None:
+            raise ValueError("no observed weights: build with w_star for calibration")
+        ts = np.asarray(theta_star, dtype=float).reshape(-1)
+        a_arr = np.broadcast_to(np.asarray(a, dtype=float), (d.n_bases,))
+        as_arr = broadcast_obs_nuggets(a_star, d.n_bases, d.obs_index.size)
+        total = LogDensity.zero()
+        for j, kern in enumerate(d.kernels):
+            v = np.concatenate([d.w[:, j], d.w_star[:, j]])
+            total = total + dense_logpdf(
+                v,
+                d.theta,
+                d.x,
+                kern,
+                float(a_arr[j]),
+                theta_star=ts,
+                obs_index=d.obs_index,
+                a_star=as_arr[j],
+            )
+        return total
+
+    def pieces(self, theta_star: ArrayLike, lam: float, lam_star: ArrayLike) -> LogDensity:
+        """Log-density and its pieces for precisions ``lambda`` and ``lambda*``."""
+        a, a_star = self._data.nuggets(lam, lam_star)
+        return self.pieces_nuggets(theta_star, a, a_star)
+
+    def stacked_grid(self) -> None:
+        """No stacked grid: the dense reference factorises the whole covariance."""
+        return None
+
+    def logpdf_batch(
+        self,
+        theta_star: ArrayLike,
+        lam: ArrayLike,
+        lam_star: ArrayLike,
+        *,
+        errors: BatchErrors = "raise",
+    ) -> FloatArray:
+        """:meth:`logpdf` at ``B`` points, one after another (arguments as the Kronecker one's)."""
+        ts, lam_arr, lam_s = check_batch_args(self._data, theta_star, lam, lam_star, errors)
+        return logpdf_loop(self, ts, lam_arr, lam_s, errors)
+
+    def batch_session(self, theta_star: ArrayLike, lam: ArrayLike, lam_star: ArrayLike) -> None:
+        """No batched form (lockstep chains evaluate each row)."""
+        check_batch_args(self._data, theta_star, lam, lam_star)
+        return None
+
+    def logpdf(self, theta_star: ArrayLike, lam: float, lam_star: ArrayLike) -> float:
+        """``sum_j log N(v_j; 0, Omega_j)`` (eq. 12 with its normalising constant)."""
+        return self.pieces(theta_star, lam, lam_star).logpdf

@@ -1,0 +1,185 @@
+"""The prior terms of the calibration posterior (eq. 16), in one place.
+
+The sampled vector is ``v = [u_1 .. u_t, lambda, lambda*]``: ``u`` is theta*
+on the normalised scale [0, 1] of the prior bounds, with the study's priors
+(uniform, or Beta(a, b) on the bounds: :meth:`bayescal.design.Prior.logpdf_unit`);
+``lambda`` and ``lambda*`` have Gamma priors built after eq. 7. Up to a
+constant the log prior is
+
+    sum_k log p_k(u_k) + (a - 1) log lambda - b lambda + (a* - 1) log lambda* - b* lambda*.
+
+:class:`CalibrationPriors` evaluates it in the three forms the samplers need:
+one point (:meth:`~CalibrationPriors.scalar`, with a fast path for uniform
+priors), ``B`` points or one coordinate of ``B`` points for chains in lockstep
+(:meth:`~CalibrationPriors.batch`, :meth:`~CalibrationPriors.term`), and the
+coefficients of the JAX log posterior (:meth:`~CalibrationPriors.beta_coefficients`).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from scipy import special
+
+from bayescal.design import BetaPrior, Prior, UniformPrior, log_gamma
+from bayescal.errors import ConfigError
+
+__all__ = ["CalibrationPriors", "ThetaPriors", "log_gamma_array"]
+
+FloatArray = NDArray[np.float64]
+_INF = math.inf
+
+
+def log_gamma_array(value: FloatArray, shape_m1: float, rate: float) -> FloatArray:
+    """``(shape - 1) log x - rate x`` for ``x > 0``, ``-inf`` elsewhere (elementwise)."""
+    positive = value > 0.0
+    safe = np.where(positive, value, 1.0)
+    out: FloatArray = np.where(positive, shape_m1 * np.log(safe) - rate * safe, -_INF)
+    return out
+
+
+@dataclass(frozen=True)
+class ThetaPriors:
+    """Priors of ``u = theta*`` on the normalised scale, one per parameter.
+
+    Parameters
+    ----------
+    priors
+        One prior per calibration parameter, in the order of ``u``.
+    """
+
+    priors: tuple[Prior, ...]
+    is_uniform: tuple[bool, ...] = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "priors", tuple(self.priors))
+        object.__setattr__(self, "is_uniform", tuple(type(p) is UniformPrior for p in self.priors))
+
+    def scalar(self, u: ArrayLike, start: float = 0.0) -> float:
+        """``start + sum_k log p_k(u_k)`` at one point (``-inf`` outside the support)."""
+        arr = np.asarray(u, dtype=float)
+        total = start
+        for k, (prior, uniform) in enumerate(zip(self.priors, self.is_uniform, strict=True)):
+            if total == -_INF:
+                break
+            if uniform:  # the common case, without numpy's overhead
+                total += 0.0 if 0.0 <= float(arr[k]) <= 1.0 else -_INF
+            else:
+                total += float(prior.logpdf_unit(arr[k]))
+        return total
+
+
+@dataclass(frozen=True)
+class CalibrationPriors:
+    """Priors of ``[u_1 .. u_t, lambda, lambda*]``.
+
+    Parameters
+    ----------
+    theta
+        One prior per calibration parameter, in the order of ``u``.
+    lam, lam_star
+        ``(shape, rate)`` of the Gamma priors of ``lambda`` and ``lambda*``.
+    """
+
+    theta: tuple[Prior, ...]
+    lam: tuple[float, float]
+    lam_star: tuple[float, float]
+    theta_priors: ThetaPriors = field(init=False, repr=False, compare=False)
+    uniform: tuple[int, ...] = field(init=False, repr=False, compare=False)
+    is_uniform: tuple[bool, ...] = field(init=False, repr=False, compare=False)
+    shape_m1: FloatArray = field(init=False, repr=False, compare=False)
+    rate: FloatArray = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "theta", tuple(self.theta))
+        lam = (float(self.lam[0]), float(self.lam[1]))
+        lam_star = (float(self.lam_star[0]), float(self.lam_star[1]))
+        object.__setattr__(self, "lam", lam)
+        object.__setattr__(self, "lam_star", lam_star)
+        theta = ThetaPriors(self.theta)
+        object.__setattr__(self, "theta_priors", theta)
+        is_uniform = theta.is_uniform
+        object.__setattr__(self, "is_uniform", is_uniform)
+        object.__setattr__(self, "uniform", tuple(k for k, u in enumerate(is_uniform) if u))
+        object.__setattr__(self, "shape_m1", np.array([lam[0] - 1.0, lam_star[0] - 1.0]))
+        object.__setattr__(self, "rate", np.array([lam[1], lam_star[1]]))
+
+    @property
+    def t(self) -> int:
+        """Number of calibration parameters."""
+        return len(self.theta)
+
+    # ------------------------------------------------------------ one point
+
+    def scalar(self, v: ArrayLike) -> float:
+        """Log prior of ``v = [u, lambda, lambda*]`` (up to a constant)."""
+        arr = np.asarray(v, dtype=float)
+        t = self.t
+        total = log_gamma(float(arr[t]), *self.lam)
+        total += log_gamma(float(arr[t + 1]), *self.lam_star)
+        return self.theta_priors.scalar(arr, total)
+
+    # ------------------------------------------------------------ B points
+
+    def term(self, column: FloatArray, k: int) -> FloatArray:
+        """Log prior of coordinate ``k`` at the values ``column`` ``(B,)``."""
+        t = self.t
+        if k >= t:
+            shape_m1, rate = float(self.shape_m1[k - t]), float(self.rate[k - t])
+            if column.min() > 0.0:
+                out: FloatArray = shape_m1 * np.log(column) - rate * column
+                return out
+            return log_gamma_array(column, shape_m1, rate)
+        if self.is_uniform[k]:
+            if column.min() >= 0.0 and column.max() <= 1.0:
+                return np.zeros(column.shape)
+            return np.where((column >= 0.0) & (column <= 1.0), 0.0, -_INF)
+        return np.asarray(self.theta[k].logpdf_unit(column), dtype=float)
+
+    def batch(self, points: FloatArray) -> FloatArray:
+        """Log prior density per row of ``points`` ``(B, t + 2)`` (up to a constant)."""
+        t = self.t
+        prec = points[:, t : t + 2]
+        if prec.min() > 0.0:
+            total = (self.shape_m1 * np.log(prec) - self.rate * prec).sum(axis=1)
+        else:
+            total = log_gamma_array(prec[:, 0], float(self.shape_m1[0]), float(self.rate[0]))
+            total += log_gamma_array(prec[:, 1], float(self.shape_m1[1]), float(self.rate[1]))
+        if self.uniform:
+            u = points[:, list(self.uniform)]
+            inside = ((u >= 0.0) & (u <= 1.0)).all(axis=1)
+            if not inside.all():
+                total[~inside] = -_INF
+        for k, prior in enumerate(self.theta):
+            if not self.is_uniform[k]:
+                total += np.asarray(prior.logpdf_unit(points[:, k]), dtype=float)
+        out: FloatArray = total
+        return out
+
+    # ------------------------------------------------------------ JAX
+
+    def beta_coefficients(self) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """The theta priors as ``a1 log u + b1 log(1 - u) + const`` per parameter.
+
+        Uniform priors give ``(0, 0, 0)``, Beta(a, b) ``(a - 1, b - 1, -log B(a, b))``.
+
+        Raises
+        ------
+        ConfigError
+            For another prior family (the JAX log posterior knows only these two).
+        """
+        n = self.t
+        a1, b1, const = np.zeros(n), np.zeros(n), np.zeros(n)
+        for k, prior in enumerate(self.theta):
+            if isinstance(prior, BetaPrior):
+                a1[k], b1[k] = prior.a - 1.0, prior.b - 1.0
+                const[k] = -float(special.betaln(prior.a, prior.b))
+            elif not isinstance(prior, UniformPrior):
+                raise ConfigError(
+                    f"sampler 'nuts' supports uniform and beta priors, got {type(prior).__name__}",
+                    hint="use sampler 'mwg' for other priors",
+                )
+        return a1, b1, const
