@@ -12,7 +12,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from bayescal.data.align import parse_time_zone
+from bayescal.clock import parse_time_zone
 from bayescal.data.readers import (
     EPW_FIELDS,
     epw_field,

@@ -36,6 +36,7 @@ from pydantic import (
     model_validator,
 )
 
+from bayescal.clock import format_duration, parse_duration, parse_time_zone
 from bayescal.config_simulators import (
     _KIND_UNITS,
     _NAME,
@@ -57,7 +58,6 @@ from bayescal.config_simulators import (
     _Section,
     parse_sensor_target,
 )
-from bayescal.data.align import format_duration, parse_duration, parse_time_zone
 from bayescal.data.measured import column_problems
 from bayescal.errors import ConfigError
 from bayescal.glossary import GLOSSARY

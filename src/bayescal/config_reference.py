@@ -18,7 +18,7 @@ from pydantic import BaseModel
 from pydantic_core import PydanticUndefined
 
 from bayescal import config as cfg
-from bayescal.data.align import format_duration
+from bayescal.clock import format_duration
 
 _SECTIONS: list[tuple[str, type[BaseModel], str]] = [
     ("[study]", cfg.StudySection, ""),

@@ -21,7 +21,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 import pandas as pd
 
-from bayescal.data.align import Gap, align, fill_gaps, format_duration
+from bayescal.clock import format_duration
+from bayescal.data.align import Gap, align, fill_gaps
 from bayescal.data.readers import (
     EPW_FIELDS,
     epw_field,

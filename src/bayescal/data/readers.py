@@ -18,7 +18,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from bayescal.data.align import MAX_LISTED, check_index, localize, parse_time_zone
+from bayescal.clock import parse_time_zone
+from bayescal.data.align import MAX_LISTED, check_index, localize
 from bayescal.errors import DataError
 
 NA_TOKENS = frozenset({"", "nan", "NaN", "NAN", "NA", "N/A", "n/a", "null", "NULL", "None", "-"})
