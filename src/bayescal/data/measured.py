@@ -77,11 +77,6 @@ class MeasuredData:
         """Number of samples on the clock."""
         return int(self.times.size)
 
-    @property
-    def gap_report(self) -> tuple[Gap, ...]:
-        """Alias of :attr:`gaps`."""
-        return self.gaps
-
     def missing(self) -> np.ndarray:
         """Samples where any calibrated output is missing, shape ``(n,)``."""
         return _missing(self.outputs, self.n)
