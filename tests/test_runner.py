@@ -15,13 +15,13 @@ import numpy as np
 import pytest
 
 import sims_for_tests as sims
-from bayescal import workers
 from bayescal.design import UniformPrior, latin_hypercube
 from bayescal.errors import ConfigError, SimulatorError
 from bayescal.runner import (
     forcing_fingerprint,
     run_design,
     run_key,
+    sandbox,
     simulator_fingerprint,
     tqdm_progress,
 )
@@ -232,7 +232,7 @@ def test_timeout_clock_starts_once_the_worker_is_ready(tmp_path: Path) -> None:
 def test_worker_that_never_starts_is_stopped(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    monkeypatch.setattr(workers, "STARTUP_LIMIT", 0.5)
+    monkeypatch.setattr(sandbox, "STARTUP_LIMIT", 0.5)
     design = latin_hypercube(PRIORS, 4, seed=0)
     sim = sims.SlowToLoad(load_delay=30.0)
     results = run_design(sim, FORCING, design, cache_dir=tmp_path, jobs=2, timeout=1.0)
