@@ -23,15 +23,38 @@ import numpy as np
 from bayescal.errors import SimulatorError
 from bayescal.simulators.base import Forcing
 
-__all__ = ["RUN_FORMAT", "forcing_fingerprint", "qualname", "run_key", "simulator_fingerprint"]
+__all__ = [
+    "FINGERPRINT_NAMES",
+    "RUN_FORMAT",
+    "forcing_fingerprint",
+    "qualname",
+    "run_key",
+    "simulator_fingerprint",
+]
 
 RUN_FORMAT = "bayescal-run/1"
+
+
+FINGERPRINT_NAMES = {
+    f"bayescal.simulators.wrappers.{name}": f"bayescal.simulators.factory.{name}"
+    for name in ("TargetedSimulator", "SensorModel")
+}
+"""Classes moved since runs were cached -> the name under which they enter fingerprints.
+
+A fingerprint holds the ``module.Class`` of the objects it describes; a class
+that moves keeps its old name here, so that runs cached before the move are
+found again (issue 14 moved the two wrappers out of ``simulators.factory``)."""
 
 
 def qualname(obj: Any) -> str:
     """``module.Class`` of an object (or of a class)."""
     kind = obj if isinstance(obj, type) else type(obj)
     return f"{kind.__module__}.{kind.__qualname__}"
+
+
+def _stable_name(name: str) -> str:
+    """The name a ``module.Class`` takes in fingerprints (see :data:`FINGERPRINT_NAMES`)."""
+    return FINGERPRINT_NAMES.get(name, name)
 
 
 def _canonical(obj: Any, seen: frozenset[int] = frozenset()) -> Any:
@@ -51,9 +74,9 @@ def _canonical(obj: Any, seen: frozenset[int] = frozenset()) -> Any:
     if isinstance(obj, Path | os.PathLike):
         return {"path": os.fspath(obj)}
     if isinstance(obj, enum.Enum):
-        return {"enum": qualname(obj), "name": obj.name}
+        return {"enum": _stable_name(qualname(obj)), "name": obj.name}
     if isinstance(obj, type) or (callable(obj) and hasattr(obj, "__qualname__")):
-        return {"callable": f"{obj.__module__}.{obj.__qualname__}"}
+        return {"callable": _stable_name(f"{obj.__module__}.{obj.__qualname__}")}
     if id(obj) in seen:
         raise SimulatorError(f"cannot fingerprint {qualname(obj)}: it refers to itself")
     seen = seen | {id(obj)}
@@ -76,7 +99,7 @@ def _canonical_object(obj: Any, seen: frozenset[int]) -> Any:
             raise SimulatorError(
                 f"{qualname(obj)}.fingerprint() must return a str, got {type(text).__name__}"
             )
-        return {"class": qualname(obj), "fingerprint": text}
+        return {"class": _stable_name(qualname(obj)), "fingerprint": text}
     if dataclasses.is_dataclass(obj):
         state = {f.name: getattr(obj, f.name) for f in dataclasses.fields(obj)}
     elif hasattr(obj, "__dict__") or hasattr(obj, "__slots__"):
@@ -92,8 +115,8 @@ def _canonical_object(obj: Any, seen: frozenset[int]) -> Any:
                 hint="give the simulator a fingerprint() method returning a str that "
                 "identifies its configuration",
             )
-        return {"class": qualname(obj), "repr": text}
-    return {"class": qualname(obj), "state": _canonical(state, seen)}
+        return {"class": _stable_name(qualname(obj)), "repr": text}
+    return {"class": _stable_name(qualname(obj)), "state": _canonical(state, seen)}
 
 
 def _sha256_json(obj: Any) -> str:
