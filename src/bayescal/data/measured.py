@@ -11,7 +11,6 @@ condition.
 from __future__ import annotations
 
 import difflib
-import re
 from collections.abc import Mapping
 from dataclasses import dataclass
 from datetime import timedelta, tzinfo
@@ -24,7 +23,6 @@ import pandas as pd
 from bayescal.clock import format_duration
 from bayescal.data.align import Gap, align, fill_gaps
 from bayescal.data.readers import (
-    EPW_FIELDS,
     epw_field,
     read_csv,
     read_epw,
@@ -32,9 +30,10 @@ from bayescal.data.readers import (
     read_parquet,
 )
 from bayescal.errors import DataError
-from bayescal.glossary import GLOSSARY, Quantity
+from bayescal.glossary import GLOSSARY, glossary_quantity
 from bayescal.periods import PeriodLayout, layout_periods
 from bayescal.simulators.base import Forcing
+from bayescal.simulators.epw_format import EPW_FIELDS
 from bayescal.units import dimension_of, to_internal
 
 if TYPE_CHECKING:
@@ -87,21 +86,6 @@ def _missing(outputs: Mapping[str, np.ndarray], n: int) -> np.ndarray:
     for values in outputs.values():
         mask |= ~np.isfinite(values)
     return mask
-
-
-_INDEXED = re.compile(r"^(?P<base>\w+_interface)_(?P<index>\d+)$")
-
-
-def glossary_quantity(name: str) -> Quantity | None:
-    """The glossary entry of a series name, or None.
-
-    Interface series of walls carry the interface index: ``temp_interface_2``
-    is a ``temp_interface`` (the interface between layers 1 and 2).
-    """
-    if name in GLOSSARY:
-        return GLOSSARY[name]
-    match = _INDEXED.match(name)
-    return GLOSSARY.get(match["base"]) if match else None
 
 
 def column_problems(key: str, name: str, spec: ColumnSpec, fmt: str) -> list[str]:
