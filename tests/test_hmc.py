@@ -15,10 +15,10 @@ from typing import Any
 import numpy as np
 import pytest
 
-from bayescal import config
 from bayescal.calibration import hmc
 from bayescal.calibration.posterior import CalibrationPosterior, Posterior, calibrate
 from bayescal.config import CalibrationSection, study_from_dict
+from bayescal.config import study as study_config
 from bayescal.design import BetaPrior
 from bayescal.emulator.assemble import Assembled, assemble
 from bayescal.emulator.gp import Emulator, train
@@ -27,7 +27,7 @@ from bayescal.errors import ConfigError
 from bayescal.pipeline import stages
 from virtual_wall import VirtualExperiment, virtual_experiment
 
-HAS_JAX = all(config.module_installed(m) for m in ("jax", "blackjax"))
+HAS_JAX = all(study_config.module_installed(m) for m in ("jax", "blackjax"))
 needs_jax = pytest.mark.skipif(not HAS_JAX, reason="the extra bayescal[hmc] is not installed")
 FIXTURE = Path(__file__).resolve().parent / "data" / "wall-study"
 BASE = tomllib.loads((FIXTURE / "study.toml").read_text(encoding="utf-8"))
@@ -268,7 +268,8 @@ def test_study_with_nuts_but_without_the_extra_fails_at_load(
 
 
 def test_sampler_option_round_trips_and_is_checked(monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setattr(config, "module_installed", lambda module: True)  # with or without JAX
+    # with or without JAX
+    monkeypatch.setattr(study_config, "module_installed", lambda module: True)
     assert CalibrationSection().sampler == "mwg"
     raw = copy.deepcopy(BASE)
     raw.setdefault("calibration", {})["sampler"] = "nuts"
@@ -283,7 +284,7 @@ def test_sampler_option_round_trips_and_is_checked(monkeypatch: pytest.MonkeyPat
 
 
 def test_pipeline_stage_passes_the_sampler(monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setattr(config, "module_installed", lambda module: True)
+    monkeypatch.setattr(study_config, "module_installed", lambda module: True)
     raw = copy.deepcopy(BASE)
     raw.setdefault("calibration", {})["sampler"] = "nuts"
     study = study_from_dict(raw, root=FIXTURE)
