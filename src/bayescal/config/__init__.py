@@ -34,7 +34,7 @@ from bayescal.config.data import FORMATS, ColumnSpec, DataSection
 from bayescal.config.energyplus import EnergyPlusOutput, EnergyPlusSchedule, EnergyPlusSection
 from bayescal.config.external import CommandOutputs, CommandSection, FmuSection
 from bayescal.config.messages import format_errors
-from bayescal.config.parameters import BetaPrior, Parameter, Prior, UniformPrior
+from bayescal.config.parameters import BetaPriorSpec, Parameter, PriorSpec, UniformPriorSpec
 from bayescal.config.simulators import BoxSimulator, LayerSpec, SimulatorSection, WallSimulator
 from bayescal.config.study import (
     NUTS_MIN_WARMUP,
@@ -57,7 +57,7 @@ __all__ = [
     "FORMATS",
     "NUTS_MIN_WARMUP",
     "STUDY_FILE",
-    "BetaPrior",
+    "BetaPriorSpec",
     "BoxSimulator",
     "CalibrationSection",
     "ColumnSpec",
@@ -78,12 +78,12 @@ __all__ = [
     "Parameter",
     "PeriodsSection",
     "PredictSection",
-    "Prior",
+    "PriorSpec",
     "RunnerSection",
     "SimulatorSection",
     "Study",
     "StudySection",
-    "UniformPrior",
+    "UniformPriorSpec",
     "WallSimulator",
     "build_simulator",
     "format_errors",

@@ -1,17 +1,26 @@
-"""The ``[parameters.<name>]`` tables: calibration parameters and their priors."""
+"""The ``[parameters.<name>]`` tables: calibration parameters and the schema of their priors.
+
+:class:`UniformPriorSpec` and :class:`BetaPriorSpec` are the priors as a study
+file writes them; :meth:`Parameter.to_prior` turns one into the prior the
+numerical code uses (:class:`bayescal.design.Prior`), carrying the parameter's
+unit and description.
+"""
 
 from __future__ import annotations
 
-from typing import Annotated, Literal, Union
+from typing import TYPE_CHECKING, Annotated, Literal, Union
 
 from pydantic import Field, model_validator
 
 from bayescal.config.base import Section, field_doc
 
-__all__ = ["BetaPrior", "Parameter", "Prior", "UniformPrior"]
+if TYPE_CHECKING:
+    from bayescal.design import Prior
+
+__all__ = ["BetaPriorSpec", "Parameter", "PriorSpec", "UniformPriorSpec"]
 
 
-class UniformPrior(Section):
+class UniformPriorSpec(Section):
     """Uniform prior on ``[lower, upper]``."""
 
     distribution: Literal["uniform"] = field_doc("Prior family.", "uniform")
@@ -19,13 +28,13 @@ class UniformPrior(Section):
     upper: float = field_doc("Upper bound, in the parameter's unit.", 0.16, allow_inf_nan=False)
 
     @model_validator(mode="after")
-    def _bounds(self) -> UniformPrior:
+    def _bounds(self) -> UniformPriorSpec:
         if not self.lower < self.upper:
             raise ValueError(f"lower bound {self.lower} >= upper bound {self.upper}")
         return self
 
 
-class BetaPrior(UniformPrior):
+class BetaPriorSpec(UniformPriorSpec):
     """Beta(a, b) prior stretched over ``[lower, upper]``."""
 
     distribution: Literal["beta"] = field_doc("Prior family.", "beta")  # type: ignore[assignment]
@@ -33,7 +42,11 @@ class BetaPrior(UniformPrior):
     b: float = field_doc("Second shape parameter. [-]", 2.0, gt=0)
 
 
-Prior = Annotated[Union[UniformPrior, BetaPrior], Field(discriminator="distribution")]  # noqa: UP007
+PriorSpec = Annotated[
+    Union[UniformPriorSpec, BetaPriorSpec],  # noqa: UP007
+    Field(discriminator="distribution"),
+]
+"""A prior as the study file writes it, told apart by ``distribution``."""
 
 
 class Parameter(Section):
@@ -41,7 +54,7 @@ class Parameter(Section):
 
     unit: str = field_doc("Unit of nominal and bounds: the SI unit of the targets.", "W/(m·K)", "1")
     nominal: float = field_doc("Nominal (catalogue) value, inside the bounds.", 0.12)
-    prior: Prior = field_doc(
+    prior: PriorSpec = field_doc(
         "Prior: {distribution = 'uniform', lower, upper} or {distribution = 'beta', lower, "
         "upper, a, b}.",
         {"distribution": "uniform", "lower": 0.08, "upper": 0.16},
@@ -67,3 +80,19 @@ class Parameter(Section):
                 f"nominal {self.nominal} is outside the prior bounds [{lower}, {upper}]"
             )
         return self
+
+    def to_prior(self) -> Prior:
+        """The prior of :mod:`bayescal.design`, with this parameter's unit and description."""
+        from bayescal.design import prior_from_spec  # scipy.stats.qmc: not needed to validate
+
+        spec = self.prior
+        a, b = getattr(spec, "a", None), getattr(spec, "b", None)
+        return prior_from_spec(
+            spec.distribution,
+            spec.lower,
+            spec.upper,
+            a,
+            b,
+            unit=self.unit,
+            description=self.description,
+        )

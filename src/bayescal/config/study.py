@@ -22,7 +22,7 @@ import os
 import tomllib
 from datetime import timedelta
 from pathlib import Path
-from typing import Annotated, Any, Literal
+from typing import TYPE_CHECKING, Annotated, Any, Literal
 
 from pydantic import (
     BeforeValidator,
@@ -51,6 +51,9 @@ from bayescal.errors import ConfigError
 from bayescal.glossary import GLOSSARY
 from bayescal.optional import module_installed
 from bayescal.units import same_scale
+
+if TYPE_CHECKING:
+    from bayescal.design import Prior
 
 __all__ = [
     "NUTS_MIN_WARMUP",
@@ -353,6 +356,10 @@ class Study(Section):
     def boundary_conditions(self) -> tuple[str, ...]:
         """Mapped columns that are not calibrated outputs."""
         return tuple(n for n in self.data.columns if n not in self.outputs.calibrate)
+
+    def priors(self) -> dict[str, Prior]:
+        """Parameter name -> prior (:class:`bayescal.design.Prior`), with unit and description."""
+        return {name: parameter.to_prior() for name, parameter in self.parameters.items()}
 
     @field_validator("parameters")
     @classmethod
