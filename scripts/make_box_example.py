@@ -102,7 +102,7 @@ def heater(rng: np.random.Generator, n: int) -> np.ndarray:
 def truth(mode: str, frame: pd.DataFrame, site: dict[str, float]) -> np.ndarray:
     """EnergyPlus's output at the true parameters on ``frame``'s clock."""
     from bayescal.simulators.base import Forcing
-    from bayescal.simulators.factory import energyplus_test_box
+    from bayescal.simulators.energyplus_box import energyplus_test_box
 
     start = np.datetime64(frame.index[0].tz_convert("UTC").tz_localize(None), "s")
     control = {"coheating": ["temp_air_in"], "freefloat": []}[mode]

@@ -99,10 +99,9 @@ def make_boundary(rng: np.random.Generator) -> pd.DataFrame:
 
 def truth_flux(frame: pd.DataFrame, truth: str) -> np.ndarray:
     """Inside heat flux at the true parameters (positive wall -> room). [W/m²]"""
-    from bayescal.config import load_study
+    from bayescal.config import build_simulator, load_study
     from bayescal.examples import path
     from bayescal.simulators.base import Forcing
-    from bayescal.simulators.factory import build_simulator
 
     study = load_study(path("wall"))
     start = pd.Timestamp(frame["time"].iloc[0]).tz_localize("Etc/GMT+6").tz_convert("UTC")

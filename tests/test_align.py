@@ -10,15 +10,13 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from bayescal.clock import format_duration, parse_duration, parse_time_zone
 from bayescal.config import load_study
 from bayescal.data.align import (
     align,
     check_index,
     fill_gaps,
-    format_duration,
     localize,
-    parse_duration,
-    parse_time_zone,
     periods_with_gaps,
 )
 from bayescal.data.measured import load_measured

@@ -18,8 +18,7 @@ import pytest
 
 from bayescal import examples
 from bayescal.cli import copy_example
-from bayescal.config import load_study
-from bayescal.config_simulators import BoxSimulator
+from bayescal.config import BoxSimulator, load_study
 from bayescal.data.measured import load_measured
 from bayescal.pipeline import Options, Results, run
 

@@ -17,8 +17,7 @@ from scipy.optimize import least_squares
 
 from bayescal import examples
 from bayescal.cli import copy_example
-from bayescal.config import load_study
-from bayescal.config_simulators import WallSimulator
+from bayescal.config import WallSimulator, load_study
 from bayescal.emulator.assemble import runs_to_columns
 from bayescal.pipeline import Options, Results, run
 

@@ -12,6 +12,7 @@ from typing import Any, Literal
 import pydantic
 import pytest
 
+import bayescal.config
 from bayescal.config import (
     BoxSimulator,
     Study,
@@ -19,6 +20,7 @@ from bayescal.config import (
     load_study,
     study_from_dict,
 )
+from bayescal.design import BetaPrior, UniformPrior
 from bayescal.errors import ConfigError
 from bayescal.simulators.box import TestBox
 from bayescal.simulators.fvm import Layer
@@ -47,6 +49,25 @@ def test_load_fixture_from_folder_and_file() -> None:
     assert by_folder.parameters["cp_fb"].prior.distribution == "beta"
     assert by_folder.design.runs == 20
     assert by_folder.calibration.chains == 4
+
+
+def test_priors_are_the_design_priors_with_unit_and_description() -> None:
+    study = _validate(lambda raw: raw["parameters"]["k_cb"].update(description="blocks"))
+    priors = study.priors()
+    assert list(priors) == list(study.parameters)
+    k_cb, cp_fb = priors["k_cb"], priors["cp_fb"]
+    assert isinstance(k_cb, UniformPrior)
+    assert (k_cb.lower, k_cb.upper, k_cb.unit, k_cb.description) == (
+        0.08,
+        0.16,
+        "W/(m·K)",
+        "blocks",
+    )
+    assert isinstance(cp_fb, BetaPrior)
+    assert (cp_fb.a, cp_fb.b, cp_fb.unit, cp_fb.description) == (1.0, 2.0, "J/(kg·K)", "")
+    assert study.parameters["cp_fb"].to_prior() == cp_fb
+    # The study file's schema and the runtime priors are two families with two names.
+    assert not {"UniformPrior", "BetaPrior", "Prior"} & set(bayescal.config.__all__)
 
 
 def test_study_is_frozen() -> None:

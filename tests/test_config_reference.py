@@ -2,7 +2,7 @@
 
 from pathlib import Path
 
-from bayescal.config_reference import study_reference_markdown
+from bayescal.config.reference import study_reference_markdown
 
 DOC = Path(__file__).resolve().parents[1] / "docs" / "study-file.md"
 
@@ -10,7 +10,7 @@ DOC = Path(__file__).resolve().parents[1] / "docs" / "study-file.md"
 def test_committed_reference_is_current() -> None:
     assert DOC.read_text(encoding="utf-8") == study_reference_markdown(), (
         "docs/study-file.md is stale: run "
-        "`python -m bayescal.config_reference > docs/study-file.md`"
+        "`python -m bayescal.config.reference > docs/study-file.md`"
     )
 
 

@@ -20,11 +20,10 @@ import pytest
 from click.testing import CliRunner
 
 from bayescal.cli import main
-from bayescal.config import load_study
+from bayescal.config import build_simulator, load_study
 from bayescal.errors import BayescalError, ConfigError
 from bayescal.simulate import check_simulation
 from bayescal.simulators.energyplus import PAPER_WALL_MODEL
-from bayescal.simulators.factory import build_simulator
 from bayescal.simulators.fvm import Layer
 from bayescal.simulators.wall import MultilayerWall
 from rc_reference import rc_exact

@@ -22,9 +22,9 @@ from bayescal.simulators.energyplus import (
     PAPER_WALL_MODEL,
     EnergyPlusSimulator,
     ScheduleInput,
-    error_messages,
     paper_wall_simulator,
 )
+from bayescal.simulators.energyplus_run import error_messages
 
 pytest.importorskip("pyenergyplus", reason="EnergyPlus adapter needs pyenergyplus-lbnl")
 

@@ -21,8 +21,8 @@ from bayescal.data.readers import read_epw
 from bayescal.errors import SimulatorError
 from bayescal.simulators.base import Forcing
 from bayescal.simulators.box import DEFAULTS, TestBox, steady_ua
+from bayescal.simulators.energyplus_box import TEST_BOX_TARGETS, energyplus_test_box
 from bayescal.simulators.epw import read_epw_site
-from bayescal.simulators.factory import TEST_BOX_TARGETS, energyplus_test_box
 
 pyenergyplus = pytest.importorskip("pyenergyplus", reason="EnergyPlus needs pyenergyplus-lbnl")
 

@@ -15,12 +15,12 @@ from typing import Any
 import numpy as np
 import pytest
 
-from bayescal import config
 from bayescal.calibration import hmc
 from bayescal.calibration.kron import make_algebra
 from bayescal.calibration.posterior import Posterior, calibrate
 from bayescal.calibration.target import CalibrationPosterior
 from bayescal.config import CalibrationSection, study_from_dict
+from bayescal.config import study as study_config
 from bayescal.design import BetaPrior
 from bayescal.emulator.assemble import Assembled, assemble
 from bayescal.emulator.gp import Emulator
@@ -282,7 +282,8 @@ def test_study_with_nuts_but_without_the_extra_fails_at_load(
 
 
 def test_sampler_option_round_trips_and_is_checked(monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setattr(config, "module_installed", lambda module: True)  # with or without JAX
+    # with or without JAX
+    monkeypatch.setattr(study_config, "module_installed", lambda module: True)
     assert CalibrationSection().sampler == "mwg"
     raw = copy.deepcopy(BASE)
     raw.setdefault("calibration", {})["sampler"] = "nuts"
@@ -297,7 +298,7 @@ def test_sampler_option_round_trips_and_is_checked(monkeypatch: pytest.MonkeyPat
 
 
 def test_pipeline_stage_passes_the_sampler(monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setattr(config, "module_installed", lambda module: True)
+    monkeypatch.setattr(study_config, "module_installed", lambda module: True)
     raw = copy.deepcopy(BASE)
     raw.setdefault("calibration", {})["sampler"] = "nuts"
     study = study_from_dict(raw, root=FIXTURE)

@@ -33,10 +33,9 @@ import pytest
 from click.testing import CliRunner
 
 from bayescal.cli import main
-from bayescal.config import load_study
+from bayescal.config import build_simulator, load_study
 from bayescal.data import load_measured
 from bayescal.errors import ConfigError
-from bayescal.simulators.factory import build_simulator
 
 HERE = Path(__file__).resolve().parent
 WALL = HERE.parent / "src" / "bayescal" / "examples" / "wall"

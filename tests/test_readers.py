@@ -12,9 +12,8 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from bayescal.data.align import parse_time_zone
+from bayescal.clock import parse_time_zone
 from bayescal.data.readers import (
-    EPW_FIELDS,
     epw_field,
     read_csv,
     read_epw,
@@ -22,6 +21,7 @@ from bayescal.data.readers import (
     read_parquet,
 )
 from bayescal.errors import DataError
+from bayescal.simulators.epw_format import EPW_FIELDS
 
 HERE = Path(__file__).resolve().parent
 FIXTURE_CSV = HERE / "data" / "wall-study" / "wall.csv"

@@ -15,17 +15,18 @@ import numpy as np
 import pytest
 
 import sims_for_tests as sims
-from bayescal import workers
 from bayescal.design import UniformPrior, latin_hypercube
 from bayescal.errors import ConfigError, SimulatorError
 from bayescal.runner import (
     forcing_fingerprint,
     run_design,
     run_key,
+    sandbox,
     simulator_fingerprint,
     tqdm_progress,
 )
 from bayescal.simulators.base import Forcing
+from bayescal.simulators.wrappers import SensorModel, TargetedSimulator
 
 HERE = Path(__file__).resolve().parent
 N = 48
@@ -84,6 +85,19 @@ def test_fingerprint_distinguishes_configurations() -> None:
     values = (0.2, 0.2 + 1e-18, float(np.nextafter(0.2, 1.0)))  # equal, equal, 1 ulp above
     keys = [run_key("s", "f", {"a": 0.1, "b": b}) for b in values]
     assert keys[0] == keys[1] != keys[2]
+
+
+def test_moved_wrappers_keep_their_fingerprints() -> None:
+    """Runs cached before the wrappers left ``simulators.factory`` (issue 14) are found again."""
+    targeted = TargetedSimulator(sims.Analytic(), {"p": ("a",), "q": ("b",)})
+    sensor = SensorModel(targeted, ("p", "q", "g"), {"g": (("y", "gain"),)})
+    # Fingerprints computed with the classes in bayescal.simulators.factory (commit 4120a10).
+    assert simulator_fingerprint(targeted) == (
+        "cf678cc1585edaf6a3bea7f5ae049bbe30363c6ecc50b8c181a95ec6873f9d46"
+    )
+    assert simulator_fingerprint(sensor) == (
+        "f009d39192a86b5539a362a575f7973488682b3ce84d72f17e19cc30ae32fa65"
+    )
 
 
 def test_fingerprint_refuses_unstable_state() -> None:
@@ -232,7 +246,7 @@ def test_timeout_clock_starts_once_the_worker_is_ready(tmp_path: Path) -> None:
 def test_worker_that_never_starts_is_stopped(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    monkeypatch.setattr(workers, "STARTUP_LIMIT", 0.5)
+    monkeypatch.setattr(sandbox, "STARTUP_LIMIT", 0.5)
     design = latin_hypercube(PRIORS, 4, seed=0)
     sim = sims.SlowToLoad(load_delay=30.0)
     results = run_design(sim, FORCING, design, cache_dir=tmp_path, jobs=2, timeout=1.0)

@@ -15,10 +15,10 @@ import pytest
 from click.testing import CliRunner
 
 from bayescal.cli import main
-from bayescal.config import load_study
+from bayescal.config import build_simulator, load_study
 from bayescal.demo import TRUTH
 from bayescal.pipeline import Options, run
-from bayescal.simulators.factory import SensorModel, build_simulator
+from bayescal.simulators.wrappers import SensorModel
 
 SERIAL = Options(backend="serial", chains_backend="serial")
 

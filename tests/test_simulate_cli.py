@@ -8,12 +8,11 @@ from click.testing import CliRunner
 
 from bayescal import examples
 from bayescal.cli import main
-from bayescal.config import load_study
+from bayescal.config import build_simulator, load_study, nominal_parameters
 from bayescal.demo import TRUTH, run_demo
 from bayescal.errors import ConfigError
 from bayescal.metrics import fit_metrics
 from bayescal.simulate import check_simulation
-from bayescal.simulators.factory import build_simulator, nominal_parameters
 
 
 def test_metrics_against_hand_computation() -> None:

@@ -16,6 +16,7 @@ Sign conventions
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass
 
 from bayescal.units import INTERNAL_UNIT
@@ -60,3 +61,18 @@ _ENTRIES = [
 ]
 
 GLOSSARY: dict[str, Quantity] = {q.name: q for q in _ENTRIES}
+
+
+_INDEXED = re.compile(r"^(?P<base>\w+_interface)_(?P<index>\d+)$")
+
+
+def glossary_quantity(name: str) -> Quantity | None:
+    """The glossary entry of a series name, or None.
+
+    Interface series of walls carry the interface index: ``temp_interface_2``
+    is a ``temp_interface`` (the interface between layers 1 and 2).
+    """
+    if name in GLOSSARY:
+        return GLOSSARY[name]
+    match = _INDEXED.match(name)
+    return GLOSSARY.get(match["base"]) if match else None

@@ -10,8 +10,6 @@ condition.
 
 from __future__ import annotations
 
-import difflib
-import re
 from collections.abc import Mapping
 from dataclasses import dataclass
 from datetime import timedelta, tzinfo
@@ -21,9 +19,9 @@ from typing import TYPE_CHECKING
 import numpy as np
 import pandas as pd
 
-from bayescal.data.align import Gap, align, fill_gaps, format_duration
+from bayescal.clock import format_duration
+from bayescal.data.align import Gap, align, fill_gaps
 from bayescal.data.readers import (
-    EPW_FIELDS,
     epw_field,
     read_csv,
     read_epw,
@@ -31,10 +29,10 @@ from bayescal.data.readers import (
     read_parquet,
 )
 from bayescal.errors import DataError
-from bayescal.glossary import GLOSSARY, Quantity
+from bayescal.glossary import glossary_quantity
 from bayescal.periods import PeriodLayout, layout_periods
 from bayescal.simulators.base import Forcing
-from bayescal.units import dimension_of, to_internal
+from bayescal.units import to_internal
 
 if TYPE_CHECKING:
     from bayescal.config import ColumnSpec, DataSection, PeriodsSection, Study
@@ -76,11 +74,6 @@ class MeasuredData:
         """Number of samples on the clock."""
         return int(self.times.size)
 
-    @property
-    def gap_report(self) -> tuple[Gap, ...]:
-        """Alias of :attr:`gaps`."""
-        return self.gaps
-
     def missing(self) -> np.ndarray:
         """Samples where any calibrated output is missing, shape ``(n,)``."""
         return _missing(self.outputs, self.n)
@@ -91,67 +84,6 @@ def _missing(outputs: Mapping[str, np.ndarray], n: int) -> np.ndarray:
     for values in outputs.values():
         mask |= ~np.isfinite(values)
     return mask
-
-
-_INDEXED = re.compile(r"^(?P<base>\w+_interface)_(?P<index>\d+)$")
-
-
-def glossary_quantity(name: str) -> Quantity | None:
-    """The glossary entry of a series name, or None.
-
-    Interface series of walls carry the interface index: ``temp_interface_2``
-    is a ``temp_interface`` (the interface between layers 1 and 2).
-    """
-    if name in GLOSSARY:
-        return GLOSSARY[name]
-    match = _INDEXED.match(name)
-    return GLOSSARY.get(match["base"]) if match else None
-
-
-def column_problems(key: str, name: str, spec: ColumnSpec, fmt: str) -> list[str]:
-    """Problems of one ``[data.columns.<name>]`` entry, each prefixed with its key path.
-
-    Checks that ``name`` is a glossary name, that the unit is of its dimension
-    and that the source suits the file format.
-    """
-    quantity = glossary_quantity(name)
-    if quantity is None:
-        close = difflib.get_close_matches(name, list(GLOSSARY), n=1)
-        hint = f"did you mean {close[0]!r}?" if close else "see bayescal.glossary"
-        return [f"{key}: {name!r} is not a glossary name; {hint}"]
-    problems = []
-    try:
-        found = dimension_of(spec.unit)
-    except DataError as exc:
-        found = None
-        problems.append(f"{key}.unit: {exc.one_line()}")
-    if found is not None and found != quantity.dimension:
-        problems.append(
-            f"{key}.unit: {spec.unit!r} is a {found.replace('_', ' ')} unit, {name} is a "
-            f"{quantity.dimension.replace('_', ' ')}"
-        )
-    if spec.sign == -1 and quantity.dimension == "temperature":
-        problems.append(f"{key}.sign: -1 on a temperature makes no sense (fluxes, powers only)")
-    return problems + _source_problems(key, spec.source, fmt)
-
-
-def _source_problems(key: str, source: str | int, fmt: str) -> list[str]:
-    if fmt == "modelica" and (not isinstance(source, int) or source < 1):
-        return [
-            f"{key}.source: Modelica tables need a column index >= 1 (0 is time), got {source!r}"
-        ]
-    if fmt in ("csv", "parquet") and not isinstance(source, str):
-        return [f"{key}.source: give the column name for format {fmt!r}, got {source!r}"]
-    names = EPW_FIELDS[6:]
-    if fmt == "epw" and isinstance(source, int) and not 6 <= source < len(EPW_FIELDS):
-        return [
-            f"{key}.source: EPW data fields are numbered 6..{len(EPW_FIELDS) - 1}, got {source}"
-        ]
-    if fmt == "epw" and isinstance(source, str) and source not in names:
-        close = difflib.get_close_matches(source, names, n=1)
-        hint = f"did you mean {close[0]!r}?" if close else f"EPW fields: {', '.join(names)}"
-        return [f"{key}.source: {source!r} is not an EPW field; {hint}"]
-    return []
 
 
 def _read(data: DataSection, sources: list[str | int]) -> tuple[pd.DataFrame, tzinfo]:

@@ -18,8 +18,10 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from bayescal.data.align import MAX_LISTED, check_index, localize, parse_time_zone
+from bayescal.clock import parse_time_zone
+from bayescal.data.align import MAX_LISTED, check_index, localize
 from bayescal.errors import DataError
+from bayescal.simulators.epw_format import EPW_FIELDS
 
 NA_TOKENS = frozenset({"", "nan", "NaN", "NAN", "NA", "N/A", "n/a", "null", "NULL", "None", "-"})
 """Cell texts read as missing values."""
@@ -351,48 +353,6 @@ def read_parquet(
 
 
 # --------------------------------------------------------------------------- EPW
-
-EPW_FIELDS: tuple[str, ...] = (
-    "year",
-    "month",
-    "day",
-    "hour",
-    "minute",
-    "data_source",
-    "temp_air_out",
-    "temp_dew",
-    "relative_humidity",
-    "pressure",
-    "etr",
-    "etrn",
-    "ir_horizontal",
-    "ghi",
-    "dni",
-    "dhi",
-    "ghi_illuminance",
-    "dni_illuminance",
-    "dhi_illuminance",
-    "zenith_luminance",
-    "wind_direction",
-    "wind_speed",
-    "total_sky_cover",
-    "opaque_sky_cover",
-    "visibility",
-    "ceiling_height",
-    "present_weather_observation",
-    "present_weather_codes",
-    "precipitable_water",
-    "aerosol_optical_depth",
-    "snow_depth",
-    "days_since_last_snowfall",
-    "albedo",
-    "liquid_precipitation_depth",
-    "liquid_precipitation_quantity",
-)
-"""Column names of an EPW data row, by field index (EnergyPlus Auxiliary Programs,
-"Weather converter"). Units: temperatures °C, relative humidity %, pressure Pa,
-irradiances W/m² (averages over the hour ending at the timestamp), wind m/s and
-degrees from north."""
 
 _EPW_MISSING = {
     "temp_air_out": 99.9,

@@ -73,29 +73,44 @@ inside face lags by one step (checked: 0.04 K and 0.03 W/m² worse on the
 sinusoid test). The output is ``Surface Inside Face Conduction Heat
 Transfer Rate per Area``, which is positive from the wall into the room, as
 ``heat_flux_in``.
+
+Where the parts live
+--------------------
+:mod:`bayescal.simulators.energyplus_model` reads a model and finds its
+objects and fields; :mod:`bayescal.simulators.energyplus_run` runs
+EnergyPlus and checks ``eplusout.err``; :mod:`bayescal.simulators.energyplus_box`
+builds the Annex 58 test box from the shipped model.
 """
 
 from __future__ import annotations
 
 import calendar
 import copy
-import importlib.util
 import json
-import re
 import sqlite3
-import subprocess
-import sys
 import tempfile
-import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Literal, cast
+from typing import Any, Literal
 
 import numpy as np
 
 from bayescal.errors import DataError, SimulatorError
 from bayescal.simulators.base import Forcing, check_parameters
+from bayescal.simulators.energyplus_model import (
+    energyplus_field_key,
+    find_object,
+    first_object,
+    load_model,
+    objects_of,
+)
+from bayescal.simulators.energyplus_run import (
+    check_errors,
+    require_pyenergyplus,
+    run_energyplus,
+    run_energyplus_in_process,
+)
 from bayescal.simulators.epw import (
     EpwSite,
     local_year,
@@ -111,18 +126,6 @@ ALGORITHMS = ("ConductionTransferFunction", "ConductionFiniteDifference")
 _CONDFD_MIN_TIMESTEPS = 20
 _WHO = "EnergyPlusSimulator"
 _DAY = 86400.0
-_MAX_MESSAGES = 3
-# The child process imports only pyenergyplus (not bayescal, whose imports cost seconds).
-_WORKER = """
-import sys
-from pyenergyplus.api import EnergyPlusAPI
-api = EnergyPlusAPI()
-state = api.state_manager.new_state()
-api.runtime.set_console_output_status(state, False)
-code = api.runtime.run_energyplus(state, sys.argv[1:])
-api.state_manager.delete_state(state)
-sys.exit(int(code))
-"""
 
 
 @dataclass(frozen=True)
@@ -147,7 +150,7 @@ class FieldTarget:
     @property
     def key(self) -> str:
         """The epJSON key of the field."""
-        return _field_key(self.field)
+        return energyplus_field_key(self.field)
 
     def __str__(self) -> str:
         return f"{self.object} {self.name!r} field {self.field!r}"
@@ -256,14 +259,14 @@ class EnergyPlusSimulator:
         isolation: Literal["subprocess", "in-process"] = "subprocess",
         workdir: str | Path | None = None,
     ) -> None:
-        _require_pyenergyplus()
+        require_pyenergyplus()
         self._model_path = Path(model_path)
         self._model = load_model(self._model_path)
         self._targets = {n: _parse_targets(n, spec) for n, spec in (parameters or {}).items()}
         self._nominal = {n: _nominal_value(self._model, t[0]) for n, t in self._targets.items()}
         self._schedules = {n: _parse_schedule(n, s) for n, s in (schedules or {}).items()}
         for spec in self._schedules.values():
-            _find_object(self._model, "Schedule:File", spec.schedule)
+            find_object(self._model, "Schedule:File", spec.schedule)
         if not outputs:
             raise SimulatorError(f"{_WHO} needs at least one output, got {outputs!r}")
         self._outputs = {n: _parse_output(n, o) for n, o in outputs.items()}
@@ -323,7 +326,9 @@ class EnergyPlusSimulator:
     def _effective_algorithm(self) -> str:
         if self._algorithm is not None:
             return self._algorithm
-        return str(_first(self._model, "HeatBalanceAlgorithm").get("algorithm", ALGORITHMS[0]))
+        return str(
+            first_object(self._model, "HeatBalanceAlgorithm").get("algorithm", ALGORITHMS[0])
+        )
 
     def simulate(self, parameters: Mapping[str, float], forcing: Forcing) -> dict[str, np.ndarray]:
         """Run EnergyPlus once.
@@ -360,7 +365,7 @@ class EnergyPlusSimulator:
         model = copy.deepcopy(self._model)
         for name, targets in self._targets.items():
             for target in targets:
-                _find_object(model, target.object, target.name)[target.key] = values[name]
+                find_object(model, target.object, target.name)[target.key] = values[name]
         self._configure(model, clock)
         for series, spec in self._schedules.items():
             _write_schedule(model, folder, spec, clock, clock.seconds, forcing[series])
@@ -387,7 +392,7 @@ class EnergyPlusSimulator:
     def _site(self) -> EpwSite:
         if self._weather_site is not None:
             return self._weather_site
-        location = _first(self._model, "Site:Location")
+        location = first_object(self._model, "Site:Location")
         return EpwSite(
             latitude=float(location.get("latitude", 0.0)),
             longitude=float(location.get("longitude", 0.0)),
@@ -399,18 +404,18 @@ class EnergyPlusSimulator:
         """Set time step, algorithm, run period, controls and outputs of ``model``."""
         model["Timestep"] = {"Timestep 1": {"number_of_timesteps_per_hour": self._tph}}
         if self._algorithm is not None:
-            settings = _first(model, "HeatBalanceAlgorithm")
+            settings = first_object(model, "HeatBalanceAlgorithm")
             model["HeatBalanceAlgorithm"] = {
                 "HeatBalanceAlgorithm 1": {**settings, "algorithm": self._algorithm}
             }
-        controls = _first(model, "SimulationControl")
+        controls = first_object(model, "SimulationControl")
         controls.update(
             run_simulation_for_sizing_periods="No",
             run_simulation_for_weather_file_run_periods="Yes",
         )
         model["SimulationControl"] = {"SimulationControl 1": controls}
         if self._min_warmup_days is not None:
-            for building in _objects(model, "Building").values():
+            for building in objects_of(model, "Building").values():
                 building["minimum_number_of_warmup_days"] = int(self._min_warmup_days)
         model["RunPeriod"] = {"bayescal run period": clock.run_period()}
         variables = model.setdefault("Output:Variable", {})
@@ -473,66 +478,7 @@ def paper_wall_simulator(
     )
 
 
-# --------------------------------------------------------------------------- model editing
-
-
-def load_model(path: Path) -> dict[str, Any]:
-    """An EnergyPlus model as an epJSON dictionary (IDF files are converted by EnergyPlus)."""
-    if not path.is_file():
-        raise SimulatorError(f"EnergyPlus model {str(path)!r} does not exist")
-    suffix = path.suffix.lower()
-    if suffix == ".epjson":
-        text = path.read_text(encoding="utf-8")
-    elif suffix == ".idf":
-        with tempfile.TemporaryDirectory(prefix="bayescal-convert-") as tmp:
-            run_energyplus(["--convert-only", "-d", tmp, str(path.resolve())], 120.0, Path(tmp))
-            converted = Path(tmp) / f"{path.stem}.epJSON"
-            if not converted.is_file():
-                check_errors(Path(tmp) / "eplusout.err", source=str(path))
-                raise SimulatorError("EnergyPlus did not convert the IDF file", source=str(path))
-            text = converted.read_text(encoding="utf-8")
-    else:
-        raise SimulatorError(
-            f"EnergyPlus model must be .epJSON or .idf, got {path.name!r}", source=str(path)
-        )
-    try:
-        model = json.loads(text)
-    except json.JSONDecodeError as exc:
-        raise SimulatorError(f"invalid epJSON: {exc}", source=str(path)) from None
-    if not isinstance(model, dict):
-        raise SimulatorError("an epJSON model must be a JSON object", source=str(path))
-    return model
-
-
-def _field_key(field: str) -> str:
-    """epJSON key of a field named as in the IDD (``"Specific Heat"`` -> ``"specific_heat"``)."""
-    return re.sub(r"[^0-9a-z]+", "_", field.strip().lower()).strip("_")
-
-
-def _objects(model: Mapping[str, Any], object_type: str) -> dict[str, Any]:
-    """All objects of a type (case-insensitive), name -> fields."""
-    for key, objects in model.items():
-        if key.lower() == object_type.lower():
-            return cast(dict[str, Any], objects)
-    return {}
-
-
-def _first(model: Mapping[str, Any], object_type: str) -> dict[str, Any]:
-    """A copy of the fields of the first object of a type, or ``{}``."""
-    return dict(next(iter(_objects(model, object_type).values()), {}))
-
-
-def _find_object(model: Mapping[str, Any], object_type: str, name: str) -> dict[str, Any]:
-    """The fields of the named object (EnergyPlus names are case-insensitive)."""
-    objects = _objects(model, object_type)
-    for key, fields in objects.items():
-        if key.lower() == name.lower():
-            return cast(dict[str, Any], fields)
-    known = sorted(objects)[:10]
-    raise SimulatorError(
-        f"the model has no {object_type} named {name!r}",
-        hint=f"{object_type} objects in the model: {known}" if known else None,
-    )
+# --------------------------------------------------------------------------- constructor arguments
 
 
 def _parse_targets(name: str, spec: Any) -> tuple[FieldTarget, ...]:
@@ -555,7 +501,7 @@ def _parse_targets(name: str, spec: Any) -> tuple[FieldTarget, ...]:
 
 
 def _nominal_value(model: Mapping[str, Any], target: FieldTarget) -> float:
-    fields = _find_object(model, target.object, target.name)
+    fields = find_object(model, target.object, target.name)
     value = fields.get(target.key)
     numeric = [k for k, v in fields.items() if isinstance(v, int | float)]
     if isinstance(value, bool) or not isinstance(value, int | float):
@@ -597,7 +543,7 @@ def _check_algorithm(algorithm: str | None) -> str | None:
 
 def _timesteps_per_hour(model: Mapping[str, Any], requested: int | None, algorithm: str) -> int:
     if requested is None:
-        timestep = _first(model, "Timestep")
+        timestep = first_object(model, "Timestep")
         requested = int(timestep.get("number_of_timesteps_per_hour", 6))
         if algorithm == "ConductionFiniteDifference":
             requested = max(requested, _CONDFD_MIN_TIMESTEPS)
@@ -688,10 +634,10 @@ def _write_schedule(
 ) -> None:
     """Write one ``Schedule:File`` CSV (one row per time step) and point the object at it."""
     grid = clock.grid + spec.lead_steps * clock.step
-    path = folder / f"schedule-{_field_key(spec.schedule)}.csv"
+    path = folder / f"schedule-{energyplus_field_key(spec.schedule)}.csv"
     rows = np.interp(grid, seconds, values).tolist()
     path.write_text("\n".join(map("{:.6f}".format, rows)) + "\n", encoding="ascii")
-    fields = _find_object(model, "Schedule:File", spec.schedule)
+    fields = find_object(model, "Schedule:File", spec.schedule)
     fields.update(
         file_name=str(path.resolve()),
         column_number=1,
@@ -728,125 +674,3 @@ def _read_series(sql: Path, spec: OutputSpec, clock: _Clock) -> np.ndarray:
     day = month_start[rows[:, 0].astype(int) - 1] + rows[:, 1] - 1
     times = day * _DAY + rows[:, 2] * 3600.0 + rows[:, 3] * 60.0
     return np.interp(clock.seconds, times, rows[:, 4])
-
-
-# --------------------------------------------------------------------------- running
-
-
-def _require_pyenergyplus() -> None:
-    if importlib.util.find_spec("pyenergyplus") is None:
-        raise SimulatorError(
-            "the EnergyPlus simulator needs the package pyenergyplus-lbnl",
-            hint="pip install 'bayescal[energyplus]'",
-        )
-
-
-def run_energyplus(arguments: Sequence[str], timeout: float, cwd: Path) -> int:
-    """Run EnergyPlus with command-line ``arguments`` in a child Python process.
-
-    Parameters
-    ----------
-    arguments
-        EnergyPlus command-line arguments (``-w``, ``-d``, model...).
-    timeout
-        Seconds after which the run is killed. [s]
-    cwd
-        Working directory of the child.
-
-    Returns
-    -------
-    int
-        EnergyPlus's exit code (errors are judged from ``eplusout.err``).
-    """
-    command = [sys.executable, "-c", _WORKER, *arguments]
-    try:
-        done = subprocess.run(
-            command, cwd=cwd, timeout=timeout, capture_output=True, text=True, check=False
-        )
-    except subprocess.TimeoutExpired:
-        raise SimulatorError(
-            f"EnergyPlus run exceeded the timeout of {timeout:g} s and was stopped",
-            hint="raise the simulator's timeout or shorten the forcing",
-        ) from None
-    if done.returncode not in (0, 1):  # 1: EnergyPlus reported errors in eplusout.err
-        tail = " ".join(done.stderr.strip().splitlines()[-3:])
-        raise SimulatorError(f"EnergyPlus process ended with code {done.returncode}: {tail}")
-    return done.returncode
-
-
-def run_energyplus_in_process(arguments: Sequence[str], timeout: float) -> int:
-    """Run EnergyPlus in this process with a fresh API state (see ``isolation``).
-
-    Parameters
-    ----------
-    arguments
-        EnergyPlus command-line arguments.
-    timeout
-        Seconds after which the run is asked to stop at its next zone time step. [s]
-
-    Returns
-    -------
-    int
-        EnergyPlus's exit code.
-    """
-    from pyenergyplus.api import EnergyPlusAPI
-
-    api = EnergyPlusAPI()
-    state = api.state_manager.new_state()
-    api.runtime.set_console_output_status(state, False)
-    deadline = time.monotonic() + timeout
-    stopped: list[bool] = []
-
-    def watchdog(run_state: Any) -> None:
-        if not stopped and time.monotonic() > deadline:
-            stopped.append(True)
-            api.runtime.stop_simulation(run_state)
-
-    api.runtime.callback_begin_zone_timestep_before_init_heat_balance(state, watchdog)
-    try:
-        code = int(api.runtime.run_energyplus(state, list(arguments)))
-    finally:
-        api.state_manager.delete_state(state)
-    if stopped:
-        raise SimulatorError(
-            f"EnergyPlus run exceeded the timeout of {timeout:g} s and was stopped",
-            hint="raise the simulator's timeout or shorten the forcing",
-        )
-    return code
-
-
-def error_messages(err_text: str) -> list[str]:
-    """Severe and fatal messages of an ``eplusout.err`` text, continuation lines joined."""
-    messages: list[str] = []
-    current: list[str] | None = None
-    for line in err_text.splitlines():
-        stripped = line.strip()
-        if stripped.startswith(("** Severe  **", "**  Fatal  **")):
-            current = [stripped]
-            messages.append("")
-        elif current is not None and stripped.startswith("**   ~~~   **"):
-            current.append(stripped.removeprefix("**   ~~~   **").strip())
-        else:
-            current = None
-        if current is not None:
-            messages[-1] = " ".join(current)
-    return messages
-
-
-def check_errors(err_file: Path, *, source: str | None = None) -> None:
-    """Raise :class:`SimulatorError` unless ``eplusout.err`` shows a clean, complete run."""
-    if not err_file.is_file():
-        raise SimulatorError("EnergyPlus wrote no eplusout.err", source=source)
-    text = err_file.read_text(encoding="utf-8", errors="replace")
-    messages = error_messages(text)
-    completed = "EnergyPlus Completed Successfully" in text
-    if messages or not completed:
-        shown = (
-            " | ".join(messages[:_MAX_MESSAGES]) or "no Severe message; the run did not complete"
-        )
-        more = len(messages) - _MAX_MESSAGES
-        raise SimulatorError(
-            f"EnergyPlus run failed: {shown}" + (f" (+{more} more)" if more > 0 else ""),
-            hint="see eplusout.err of the run (pass workdir= to keep it)",
-            source=source,
-        )

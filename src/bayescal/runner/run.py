@@ -1,13 +1,13 @@
 """Run a simulator over a design, many runs at a time, cached per run and resumable.
 
 Each run (one row of the design) is identified by a key, the SHA-256 of the
-simulator's configuration (:func:`simulator_fingerprint`), the boundary
-conditions (:func:`forcing_fingerprint`) and the run's parameter values. A
-finished run is written at once, atomically, to ``cache_dir/runs/<key>.npz``
-(outputs, parameters, metadata); a run that failed after all its attempts is
-described in ``cache_dir/failures/<key>.json``. Calling :func:`run_design`
-again with the same inputs loads the finished runs and runs only the missing
-ones (failed runs are tried again: a failure is not cached).
+simulator's configuration, the boundary conditions and the run's parameter
+values (:mod:`bayescal.runner.keys`). A finished run is written at once,
+atomically, to ``cache_dir/runs/<key>.npz`` (outputs, parameters, metadata); a
+run that failed after all its attempts is described in
+``cache_dir/failures/<key>.json`` (:mod:`bayescal.runner.cache`). Calling
+:func:`run_design` again with the same inputs loads the finished runs and runs
+only the missing ones (failed runs are tried again: a failure is not cached).
 
 Backends
 --------
@@ -31,7 +31,7 @@ Backends
     crashes are handled the same way and never take a Dask worker down.
 
 The clock of ``timeout`` starts once a worker has loaded the simulator (see
-:mod:`bayescal.workers`), so slow imports do not count against a run.
+:mod:`bayescal.runner.sandbox`), so slow imports do not count against a run.
 Results come back to the calling process, which alone writes the cache, so
 remote Dask workers need no shared file system.
 """
@@ -39,197 +39,34 @@ remote Dask workers need no shared file system.
 from __future__ import annotations
 
 import contextlib
-import dataclasses
-import enum
 import hashlib
 import itertools
-import json
 import math
 import os
 import queue
 import time
-import zipfile
 from collections import deque
-from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field
-from datetime import UTC, datetime
+from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 
-from bayescal import __version__, workers
-from bayescal.atomic import atomic_write_json, atomic_write_npz, read_npz
-from bayescal.errors import ConfigError, SimulatorError
+from bayescal import __version__
+from bayescal.errors import ConfigError
+from bayescal.runner import sandbox as workers
+from bayescal.runner.cache import Ledger, Progress, load_run
+from bayescal.runner.keys import forcing_fingerprint, qualname, run_key, simulator_fingerprint
 from bayescal.simulators.base import Forcing, Simulator
-from bayescal.workers import qualname
 
 if TYPE_CHECKING:  # not at run time: worker processes start faster without scipy.stats
     from bayescal.design import Design
 
-__all__ = [
-    "Progress",
-    "RunFailure",
-    "RunResults",
-    "forcing_fingerprint",
-    "run_design",
-    "run_key",
-    "simulator_fingerprint",
-    "tqdm_progress",
-]
+__all__ = ["BACKENDS", "Backend", "RunFailure", "RunResults", "run_design", "tqdm_progress"]
 
 Backend = Literal["serial", "processes", "dask"]
 BACKENDS: tuple[str, ...] = ("serial", "processes", "dask")
-Progress = Callable[[int, int, int], None]
-"""``progress(done, failed, total)``: runs finished (including loaded from the
-cache), runs failed for good, and runs in the design."""
-
-RUN_FORMAT = "bayescal-run/1"
-
-
-# --------------------------------------------------------------------------- keys
-
-
-def _canonical(obj: Any, seen: frozenset[int] = frozenset()) -> Any:
-    """A JSON-able description of ``obj`` that is the same in every process."""
-    if obj is None or isinstance(obj, bool | int | float | str):
-        return obj
-    if isinstance(obj, np.ndarray):
-        if obj.dtype.hasobject:
-            return {"ndarray": "object", "items": _canonical(obj.tolist(), seen)}
-        data = np.ascontiguousarray(obj)
-        digest = hashlib.sha256(data.tobytes()).hexdigest()
-        return {"ndarray": data.dtype.str, "shape": list(data.shape), "sha256": digest}
-    if isinstance(obj, np.generic):
-        return {"numpy": obj.dtype.str, "value": _canonical(obj.item(), seen)}
-    if isinstance(obj, bytes):
-        return {"bytes": hashlib.sha256(obj).hexdigest()}
-    if isinstance(obj, Path | os.PathLike):
-        return {"path": os.fspath(obj)}
-    if isinstance(obj, enum.Enum):
-        return {"enum": qualname(obj), "name": obj.name}
-    if isinstance(obj, type) or (callable(obj) and hasattr(obj, "__qualname__")):
-        return {"callable": f"{obj.__module__}.{obj.__qualname__}"}
-    if id(obj) in seen:
-        raise SimulatorError(f"cannot fingerprint {qualname(obj)}: it refers to itself")
-    seen = seen | {id(obj)}
-    if isinstance(obj, Mapping):
-        items = [[_canonical(k, seen), _canonical(v, seen)] for k, v in obj.items()]
-        return {"mapping": sorted(items, key=lambda kv: json.dumps(kv[0], sort_keys=True))}
-    if isinstance(obj, list | tuple):
-        return {type(obj).__name__: [_canonical(v, seen) for v in obj]}
-    if isinstance(obj, set | frozenset):
-        items = [_canonical(v, seen) for v in obj]
-        return {"set": sorted(items, key=lambda v: json.dumps(v, sort_keys=True))}
-    return _canonical_object(obj, seen)
-
-
-def _canonical_object(obj: Any, seen: frozenset[int]) -> Any:
-    method = getattr(obj, "fingerprint", None)
-    if callable(method):
-        text = method()
-        if not isinstance(text, str):
-            raise SimulatorError(
-                f"{qualname(obj)}.fingerprint() must return a str, got {type(text).__name__}"
-            )
-        return {"class": qualname(obj), "fingerprint": text}
-    if dataclasses.is_dataclass(obj):
-        state = {f.name: getattr(obj, f.name) for f in dataclasses.fields(obj)}
-    elif hasattr(obj, "__dict__") or hasattr(obj, "__slots__"):
-        state = dict(getattr(obj, "__dict__", {}))
-        for slot in getattr(type(obj), "__slots__", ()):
-            if hasattr(obj, slot):
-                state[slot] = getattr(obj, slot)
-    else:
-        text = repr(obj)
-        if " at 0x" in text:
-            raise SimulatorError(
-                f"cannot fingerprint {qualname(obj)}: its repr changes between processes",
-                hint="give the simulator a fingerprint() method returning a str that "
-                "identifies its configuration",
-            )
-        return {"class": qualname(obj), "repr": text}
-    return {"class": qualname(obj), "state": _canonical(state, seen)}
-
-
-def _sha256_json(obj: Any) -> str:
-    text = json.dumps(obj, sort_keys=True, separators=(",", ":"), allow_nan=True)
-    return hashlib.sha256(text.encode("utf-8")).hexdigest()
-
-
-def simulator_fingerprint(simulator: Any) -> str:
-    """A stable hash of a simulator's configuration.
-
-    Uses ``simulator.fingerprint()`` (a str) when the simulator has one;
-    otherwise the class name and a canonical description of its state
-    (dataclass fields, or the instance's attributes), in which arrays enter by
-    the SHA-256 of their bytes. Pickle is not used, so the value does not
-    depend on the Python or library versions. A simulator whose state holds
-    objects without a stable description (their ``repr`` shows a memory
-    address) must define ``fingerprint()``; so should one that fills caches
-    in its attributes lazily.
-
-    Parameters
-    ----------
-    simulator
-        The simulator.
-
-    Returns
-    -------
-    str
-        64 hexadecimal digits.
-    """
-    return _sha256_json(_canonical(simulator))
-
-
-def forcing_fingerprint(forcing: Forcing) -> str:
-    """A stable hash of the boundary conditions (clock, names and values).
-
-    Parameters
-    ----------
-    forcing
-        The boundary conditions.
-
-    Returns
-    -------
-    str
-        64 hexadecimal digits.
-    """
-    digest = hashlib.sha256()
-    start = np.asarray(forcing.start, dtype="datetime64[ns]")
-    digest.update(f"step={float(forcing.step)!r};start={start}".encode())
-    for name in sorted(forcing.series):
-        values = np.ascontiguousarray(forcing[name], dtype="<f8")
-        digest.update(f";{name}:{values.size}:".encode())
-        digest.update(values.tobytes())
-    return digest.hexdigest()
-
-
-def run_key(simulator_fp: str, forcing_fp: str, parameters: Mapping[str, float]) -> str:
-    """The cache key of one run.
-
-    Parameters
-    ----------
-    simulator_fp
-        :func:`simulator_fingerprint` of the simulator.
-    forcing_fp
-        :func:`forcing_fingerprint` of the boundary conditions.
-    parameters
-        Parameter name -> value, in physical units (exact float values matter).
-
-    Returns
-    -------
-    str
-        64 hexadecimal digits.
-    """
-    values = {name: float(parameters[name]).hex() for name in sorted(parameters)}
-    description = {
-        "format": RUN_FORMAT,
-        "simulator": simulator_fp,
-        "forcing": forcing_fp,
-        "parameters": values,
-    }
-    return _sha256_json(description)
 
 
 # ----------------------------------------------------------------------- results
@@ -324,108 +161,17 @@ class RunResults:
         return len(self.failures)
 
 
-# ---------------------------------------------------------------- bookkeeping
-
-
-@dataclass
-class _Ledger:
-    """Tracks attempts, writes the cache and reports progress (caller's process only)."""
-
-    cache_dir: Path
-    parameters: dict[str, dict[str, float]]  # key -> parameter values
-    weight: dict[str, int]  # key -> number of design rows with that key
-    retries: int
-    progress: Progress | None
-    total: int
-    metadata: dict[str, Any]
-    outputs: dict[str, dict[str, np.ndarray]] = field(default_factory=dict)
-    errors: dict[str, list[dict]] = field(default_factory=dict)
-    done: int = 0
-    failed: int = 0
-    attempts: int = 0
-
-    def report(self) -> None:
-        if self.progress is not None:
-            self.progress(self.done, self.failed, self.total)
-
-    def loaded(self, key: str, outputs: dict[str, np.ndarray]) -> None:
-        self.outputs[key] = outputs
-        self.done += self.weight[key]
-
-    def record(self, key: str, outcome: dict) -> bool:
-        """Book one attempt's outcome; ``True`` if the run should be tried again."""
-        self.attempts += 1
-        history = self.errors.setdefault(key, [])
-        if outcome["ok"]:
-            self._write_run(key, outcome, len(history) + 1)
-            with contextlib.suppress(FileNotFoundError):
-                (self.cache_dir / "failures" / f"{key}.json").unlink()
-            self.outputs[key] = outcome["outputs"]
-            self.done += self.weight[key]
-            self.report()
-            return False
-        history.append({**outcome["error"], "seconds": _finite_or_none(outcome["seconds"])})
-        if len(history) <= self.retries:
-            return True
-        document = {
-            "format": RUN_FORMAT,
-            "key": key,
-            "parameters": self.parameters[key],
-            "attempts": history,
-            "written": datetime.now(UTC).isoformat(),
-            **self.metadata,
-        }
-        atomic_write_json(self.cache_dir / "failures" / f"{key}.json", document)
-        self.failed += self.weight[key]
-        self.report()
-        return False
-
-    def _write_run(self, key: str, outcome: dict, attempts: int) -> None:
-        parameters = self.parameters[key]
-        metadata = {
-            "format": RUN_FORMAT,
-            "key": key,
-            "seconds": _finite_or_none(outcome["seconds"]),
-            "attempts": attempts,
-            "written": datetime.now(UTC).isoformat(),
-            **self.metadata,
-        }
-        arrays: dict[str, Any] = {f"out:{n}": v for n, v in outcome["outputs"].items()}
-        arrays["parameter_names"] = np.array(list(parameters), dtype=str)
-        arrays["parameter_values"] = np.array(list(parameters.values()), dtype=float)
-        arrays["metadata"] = np.array(json.dumps(metadata))
-        atomic_write_npz(self.cache_dir / "runs" / f"{key}.npz", arrays)
-
-
-def _finite_or_none(value: float) -> float | None:
-    return value if math.isfinite(value) else None
-
-
-def _load_run(path: Path, names: tuple[str, ...], n: int) -> dict[str, np.ndarray] | None:
-    """Outputs of a cached run, or ``None`` if absent or unusable (it is then re-run)."""
-    if not path.is_file():
-        return None
-    try:
-        arrays = read_npz(path)
-    except (OSError, ValueError, EOFError, zipfile.BadZipFile):
-        return None
-    outputs = {name: arrays.get(f"out:{name}") for name in names}
-    if any(v is None or v.shape != (n,) for v in outputs.values()):
-        return None
-    return {name: np.asarray(v, dtype=float) for name, v in outputs.items()}
-
-
 # ---------------------------------------------------------------------- backends
 
 
-def _run_serial(simulator: Simulator, forcing: Forcing, todo: list[str], ledger: _Ledger) -> None:
+def _run_serial(simulator: Simulator, forcing: Forcing, todo: list[str], ledger: Ledger) -> None:
     for key in todo:
         while ledger.record(key, workers.execute(simulator, forcing, ledger.parameters[key])):
             pass
 
 
 def _run_processes(
-    payload: bytes, todo: list[str], ledger: _Ledger, jobs: int, timeout: float | None
+    payload: bytes, todo: list[str], ledger: Ledger, jobs: int, timeout: float | None
 ) -> None:
     events: queue.Queue[tuple[int, Any]] = queue.Queue()
     pending = deque(todo)
@@ -479,7 +225,7 @@ def _run_dask(
     payload: bytes,
     context: str,
     todo: list[str],
-    ledger: _Ledger,
+    ledger: Ledger,
     jobs: int,
     timeout: float | None,
     scheduler: str | None,
@@ -516,7 +262,7 @@ def _run_dask(
 
 
 def _collect_dask(
-    as_completed: Any, submit: Callable[[str], Any], todo: list[str], ledger: _Ledger
+    as_completed: Any, submit: Callable[[str], Any], todo: list[str], ledger: Ledger
 ) -> None:
     """Book the Dask futures as they finish; resubmit runs to retry."""
     futures = {submit(key): key for key in todo}
@@ -637,7 +383,7 @@ def run_design(
         "forcing_fingerprint": forcing_fp,
         "bayescal": __version__,
     }
-    ledger = _Ledger(
+    ledger = Ledger(
         cache_dir=cache,
         parameters=dict(zip(keys, rows, strict=True)),
         weight={key: keys.count(key) for key in keys},
@@ -649,7 +395,7 @@ def run_design(
     names, n = tuple(simulator.output_names), forcing.n
     todo = []
     for key in ledger.parameters:
-        cached = _load_run(cache / "runs" / f"{key}.npz", names, n)
+        cached = load_run(cache / "runs" / f"{key}.npz", names, n)
         if cached is None:
             todo.append(key)
         else:
@@ -670,7 +416,7 @@ def run_design(
 def _collect(
     design: Design,
     keys: list[str],
-    ledger: _Ledger,
+    ledger: Ledger,
     names: tuple[str, ...],
     n: int,
     n_cached: int,

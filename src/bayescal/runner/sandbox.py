@@ -36,16 +36,11 @@ from typing import IO, Any
 import numpy as np
 
 from bayescal.errors import SimulatorError
+from bayescal.runner.keys import qualname
 from bayescal.simulators.base import Forcing, Simulator
 
 TEXT_TAIL = 10_000  # characters of stderr / traceback kept in a failure record
 STARTUP_LIMIT = 120.0  # [s] a worker must load the simulator within this, if timeout is set
-
-
-def qualname(obj: Any) -> str:
-    """``module.Class`` of an object (or of a class)."""
-    kind = obj if isinstance(obj, type) else type(obj)
-    return f"{kind.__module__}.{kind.__qualname__}"
 
 
 # ----------------------------------------------------------------- one simulation
@@ -169,7 +164,7 @@ def sandbox_main() -> None:
         os._exit(0)
 
 
-_SANDBOX_CODE = "from bayescal.workers import sandbox_main; sandbox_main()"
+_SANDBOX_CODE = "from bayescal.runner.sandbox import sandbox_main; sandbox_main()"
 _STOP = object()
 
 

@@ -1,6 +1,6 @@
 """The study-file reference, generated from the configuration models.
 
-``python -m bayescal.config_reference > docs/study-file.md`` writes it; a test
+``python -m bayescal.config.reference > docs/study-file.md`` writes it; a test
 checks that the committed file equals the generated text, so the reference
 cannot drift from the code.
 """
@@ -17,37 +17,42 @@ from typing import Any
 from pydantic import BaseModel
 from pydantic_core import PydanticUndefined
 
-from bayescal import config as cfg
-from bayescal.data.align import format_duration
+from bayescal.clock import format_duration
+from bayescal.config import data as cfg_data
+from bayescal.config import energyplus as cfg_energyplus
+from bayescal.config import external as cfg_external
+from bayescal.config import parameters as cfg_parameters
+from bayescal.config import simulators as cfg_simulators
+from bayescal.config import study as cfg_study
 
 _SECTIONS: list[tuple[str, type[BaseModel], str]] = [
-    ("[study]", cfg.StudySection, ""),
-    ("[data]", cfg.DataSection, ""),
-    ("[data.columns.<glossary name>]", cfg.ColumnSpec, ""),
-    ('[simulator] type = "wall"', cfg.WallSimulator, ""),
-    ("[[simulator.layers]]", cfg.LayerSpec, "one table per layer, outside to inside"),
-    ('[simulator] type = "box"', cfg.BoxSimulator, ""),
-    ('[simulator] type = "energyplus"', cfg.EnergyPlusSection, ""),
+    ("[study]", cfg_study.StudySection, ""),
+    ("[data]", cfg_data.DataSection, ""),
+    ("[data.columns.<glossary name>]", cfg_data.ColumnSpec, ""),
+    ('[simulator] type = "wall"', cfg_simulators.WallSimulator, ""),
+    ("[[simulator.layers]]", cfg_simulators.LayerSpec, "one table per layer, outside to inside"),
+    ('[simulator] type = "box"', cfg_simulators.BoxSimulator, ""),
+    ('[simulator] type = "energyplus"', cfg_energyplus.EnergyPlusSection, ""),
     (
         "[simulator.schedules.<glossary name>]",
-        cfg.EnergyPlusSchedule,
+        cfg_energyplus.EnergyPlusSchedule,
         "energyplus; or just the Schedule:File name",
     ),
-    ("[simulator.outputs.<name>]", cfg.EnergyPlusOutput, ""),
-    ('[simulator] type = "command"', cfg.CommandSection, ""),
-    ("[simulator.outputs]", cfg.CommandOutputs, ""),
-    ('[simulator] type = "fmu"', cfg.FmuSection, ""),
-    ("[parameters.<name>]", cfg.Parameter, ""),
-    ('prior = { distribution = "uniform", ... }', cfg.UniformPrior, ""),
-    ('prior = { distribution = "beta", ... }', cfg.BetaPrior, ""),
-    ("[outputs]", cfg.OutputsSection, ""),
-    ("[periods]", cfg.PeriodsSection, ""),
-    ("[design]", cfg.DesignSection, ""),
-    ("[emulator]", cfg.EmulatorSection, ""),
-    ("[calibration]", cfg.CalibrationSection, ""),
-    ("[discrepancy]", cfg.DiscrepancySection, ""),
-    ("[predict]", cfg.PredictSection, ""),
-    ("[runner]", cfg.RunnerSection, ""),
+    ("[simulator.outputs.<name>]", cfg_energyplus.EnergyPlusOutput, ""),
+    ('[simulator] type = "command"', cfg_external.CommandSection, ""),
+    ("[simulator.outputs]", cfg_external.CommandOutputs, ""),
+    ('[simulator] type = "fmu"', cfg_external.FmuSection, ""),
+    ("[parameters.<name>]", cfg_parameters.Parameter, ""),
+    ('prior = { distribution = "uniform", ... }', cfg_parameters.UniformPriorSpec, ""),
+    ('prior = { distribution = "beta", ... }', cfg_parameters.BetaPriorSpec, ""),
+    ("[outputs]", cfg_study.OutputsSection, ""),
+    ("[periods]", cfg_study.PeriodsSection, ""),
+    ("[design]", cfg_study.DesignSection, ""),
+    ("[emulator]", cfg_study.EmulatorSection, ""),
+    ("[calibration]", cfg_study.CalibrationSection, ""),
+    ("[discrepancy]", cfg_study.DiscrepancySection, ""),
+    ("[predict]", cfg_study.PredictSection, ""),
+    ("[runner]", cfg_study.RunnerSection, ""),
 ]
 
 
@@ -108,7 +113,7 @@ def study_reference_markdown() -> str:
     head = [
         "# Study file reference (`study.toml`)",
         "",
-        "Generated from `bayescal.config` by `python -m bayescal.config_reference`; do not edit.",
+        "Generated from `bayescal.config` by `python -m bayescal.config.reference`; do not edit.",
         "Units are given in brackets in each description. Durations are written like",
         '`"30min"`, `"1D"`, `"3h"`; instants as ISO 8601. Relative paths start at the study',
         "folder.",

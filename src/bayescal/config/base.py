@@ -1,0 +1,106 @@
+"""What every section of the study file shares: the frozen pydantic base, documented
+fields, cross-field problems, name suggestions, paths, durations and instants.
+
+Every field carries a description (its unit in brackets) and examples
+(:func:`field_doc`); the study-file reference is generated from them.
+"""
+
+from __future__ import annotations
+
+import difflib
+import os
+import re
+from datetime import date, datetime, timedelta
+from pathlib import Path
+from typing import Annotated, Any
+
+import pandas as pd
+from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, ValidationInfo
+from pydantic_core import PydanticCustomError
+
+from bayescal.clock import parse_duration
+
+__all__ = [
+    "IDENTIFIER",
+    "Duration",
+    "Instant",
+    "Section",
+    "field_doc",
+    "raise_problems",
+    "resolve_path",
+    "suggestion",
+]
+
+IDENTIFIER = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
+"""Names a study gives (parameters, layers): letters, digits and ``_``, no leading digit."""
+
+
+class Section(BaseModel):
+    """Base of every section: frozen, and unknown keys are errors."""
+
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+
+def field_doc(description: str, *examples: Any, **constraints: Any) -> Any:
+    """A documented field: description (unit in brackets), examples, constraints."""
+    return Field(description=description, examples=list(examples), **constraints)
+
+
+def raise_problems(messages: list[str]) -> None:
+    """Raise the collected cross-field problems (each message starts with its key path)."""
+    if messages:
+        raise PydanticCustomError("cross_check", "{text}", {"text": "; ".join(messages)})
+
+
+def suggestion(name: str, valid: list[str] | tuple[str, ...]) -> str:
+    """``"; did you mean 'x'?"`` for the closest valid name, else the list of valid names."""
+    close = difflib.get_close_matches(name, list(valid), n=1)
+    return f"; did you mean {close[0]!r}?" if close else f"; expected one of {', '.join(valid)}"
+
+
+def resolve_path(value: Path, info: ValidationInfo, what: str) -> Path:
+    """An absolute path; relative ones start at the study folder and may not leave it."""
+    if str(value) in ("", "."):
+        raise ValueError(f"expected {what}, got {str(value)!r}")
+    if value.is_absolute():
+        return value
+    root = Path(os.path.normpath(Path((info.context or {}).get("root", Path.cwd()))))
+    resolved = Path(os.path.normpath(root / value))
+    if not resolved.is_relative_to(root):
+        raise ValueError(
+            f"path {str(value)!r} leaves the study folder; give an absolute path or move "
+            "it into the study folder"
+        )
+    return resolved
+
+
+def _duration(value: object) -> timedelta:
+    return parse_duration(value).to_pytimedelta()
+
+
+def _instant(value: object) -> datetime:
+    result = _parse_instant(value)
+    if not 1678 <= result.year <= 2261:  # the range of nanosecond timestamps
+        raise ValueError(f"expected a date-time between the years 1678 and 2261, got {value!r}")
+    return result
+
+
+def _parse_instant(value: object) -> datetime:
+    if isinstance(value, datetime):
+        return value
+    if isinstance(value, date):
+        return datetime(value.year, value.month, value.day)
+    try:
+        if not isinstance(value, str):
+            raise TypeError
+        return pd.Timestamp(value).to_pydatetime()
+    except (ValueError, TypeError):
+        raise ValueError(
+            f"expected a date-time such as '2013-08-21T00:00:00', got {value!r}"
+        ) from None
+
+
+Duration = Annotated[timedelta, BeforeValidator(_duration)]
+"""A duration written with a unit: ``"30min"``, ``"1h"``, ``"1D"``."""
+Instant = Annotated[datetime, BeforeValidator(_instant)]
+"""A date-time; naive values are local times of ``[data].time_zone``."""

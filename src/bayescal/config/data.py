@@ -1,0 +1,254 @@
+"""The ``[data]`` section of the study file: the measured-data file, its clock and its columns.
+
+Each ``[data.columns.<glossary name>]`` entry is checked here, before any file
+is read (:func:`column_problems`): a glossary name, a unit of its dimension
+and a source that suits the file format. Reading the data is
+:func:`bayescal.data.load_measured`'s job.
+"""
+
+from __future__ import annotations
+
+import difflib
+from datetime import datetime, timedelta, tzinfo
+from pathlib import Path
+from typing import Any, Literal
+
+import pandas as pd
+from pydantic import ValidationInfo, field_validator, model_validator
+
+from bayescal.clock import format_duration, parse_time_zone
+from bayescal.config.base import (
+    Duration,
+    Instant,
+    Section,
+    field_doc,
+    raise_problems,
+    resolve_path,
+)
+from bayescal.errors import DataError
+from bayescal.glossary import GLOSSARY, glossary_quantity
+from bayescal.simulators.epw_format import EPW_FIELDS
+from bayescal.units import dimension_of
+
+__all__ = ["FORMATS", "ColumnSpec", "DataSection", "column_problems"]
+
+FORMATS = ("csv", "parquet", "epw", "modelica")
+_EXTENSIONS = {".csv": "csv", ".tsv": "csv", ".parquet": "parquet", ".pq": "parquet"}
+_EXTENSIONS |= {".epw": "epw", ".txt": "modelica", ".mos": "modelica"}
+
+
+class ColumnSpec(Section):
+    """``[data.columns.<glossary name>]``: where a series comes from and its unit."""
+
+    source: str | int = field_doc(
+        "Column name (CSV, Parquet, EPW field name) or integer index (Modelica: 1..COLS-1, "
+        "column 0 being time; EPW: field number).",
+        "T_in",
+        14,
+    )
+    unit: str = field_doc(
+        "Unit in the file; of the glossary quantity's dimension (°F for a temperature is "
+        "fine, kW is not). See bayescal.units.",
+        "degC",
+        "W/m2",
+    )
+    scale: float = field_doc(
+        "Factor applied before unit conversion. [-]", 0.98, default=1.0, allow_inf_nan=False
+    )
+    sign: Literal[1, -1] = field_doc(
+        "-1 flips the sign after conversion (a flux measured with the opposite convention).",
+        -1,
+        default=1,
+    )
+
+    @field_validator("source", mode="before")
+    @classmethod
+    def _source(cls, value: object) -> object:
+        if isinstance(value, bool) or not isinstance(value, str | int):
+            raise ValueError(f"expected a column name or an integer index, got {value!r}")
+        return value
+
+
+class DataSection(Section):
+    """``[data]``: the measured-data file, its clock and its columns."""
+
+    file: Path = field_doc(
+        "Data file, relative to the study folder (or absolute).", "data/wall.csv"
+    )
+    format: Literal["csv", "parquet", "epw", "modelica"] = field_doc(
+        "File format; by default from the extension (.csv/.tsv, .parquet/.pq, .epw, "
+        ".txt/.mos = Modelica CombiTimeTable).",
+        "csv",
+    )
+    time_column: str | None = field_doc(
+        "Timestamp column (csv, parquet: required).", "time", default=None
+    )
+    time_format: str | None = field_doc(
+        "strftime format of the timestamps (csv, parquet); ISO 8601 if omitted.",
+        "%d/%m/%Y %H:%M",
+        default=None,
+    )
+    time_zone: str = field_doc(
+        "Zone of naive timestamps and of start, end, epoch: IANA name or fixed offset. The "
+        "clock inside is UTC. Not for EPW (the file has its own).",
+        "UTC+01:00",
+        "Europe/Brussels",
+        default="UTC",
+    )
+    epoch: Instant | None = field_doc(
+        "Modelica tables: the instant of t = 0 (column 0 is seconds since it).",
+        "2013-01-01T00:00:00",
+        default=None,
+    )
+    table: str | None = field_doc(
+        "Modelica: table name in a file with several.", "data", default=None
+    )
+    delimiter: str = field_doc("CSV field separator.", ";", default=",", min_length=1, max_length=1)
+    decimal: Literal[".", ","] = field_doc("CSV decimal mark.", ",", default=".")
+    step: Duration = field_doc(
+        "Step of the study clock. Finer data are averaged over centred windows "
+        "[t - step/2, t + step/2); coarser data are an error.",
+        "30min",
+        "10min",
+    )
+    max_gap_interpolate: Duration = field_doc(
+        "Gaps up to this length are interpolated linearly; longer ones are reported and "
+        "their periods dropped. Default: never interpolate.",
+        "1h",
+        default=timedelta(0),
+    )
+    start: Instant | None = field_doc(
+        "First clock instant: crops the record and fixes the grid (default: the grid is "
+        "anchored at local midnight).",
+        "2013-08-21T00:00:00",
+        default=None,
+    )
+    end: Instant | None = field_doc(
+        "End of the record, exclusive.", "2013-09-30T00:00:00", default=None
+    )
+    columns: dict[str, ColumnSpec] = field_doc(
+        "Glossary name -> file column. Outputs in [outputs].calibrate are measurements, "
+        "every other column a boundary condition.",
+        {"heat_flux_in": {"source": "q_in", "unit": "W/m2"}},
+        min_length=1,
+    )
+
+    @model_validator(mode="before")
+    @classmethod
+    def _infer_format(cls, data: Any) -> Any:
+        if isinstance(data, dict) and "format" not in data and isinstance(data.get("file"), str):
+            suffix = Path(data["file"]).suffix.lower()
+            if suffix not in _EXTENSIONS:
+                raise ValueError(
+                    f"cannot tell the format of {data['file']!r} from its extension; set "
+                    f"data.format to one of {', '.join(map(repr, FORMATS))}"
+                )
+            return {**data, "format": _EXTENSIONS[suffix]}
+        return data
+
+    @field_validator("file")
+    @classmethod
+    def _file(cls, value: Path, info: ValidationInfo) -> Path:
+        return resolve_path(value, info, "a file name")
+
+    @field_validator("time_zone")
+    @classmethod
+    def _zone(cls, value: str) -> str:
+        parse_time_zone(value)
+        return value
+
+    @field_validator("step", "max_gap_interpolate")
+    @classmethod
+    def _not_negative(cls, value: timedelta, info: ValidationInfo) -> timedelta:
+        if value < timedelta(0) or (info.field_name == "step" and not value):
+            raise ValueError(
+                f"must be {'positive' if info.field_name == 'step' else '>= 0'}, "
+                f"got {format_duration(value)}"
+            )
+        return value
+
+    @model_validator(mode="after")
+    def _consistent(self) -> DataSection:
+        problems = self._format_problems()
+        for name, spec in self.columns.items():
+            problems += column_problems(f"data.columns.{name}", name, spec, self.format)
+        raise_problems(problems)
+        return self
+
+    def _format_problems(self) -> list[str]:
+        fmt, given = self.format, self.model_fields_set
+        problems = []
+        if fmt in ("csv", "parquet") and self.time_column is None:
+            problems.append(f"data.time_column: required for format {fmt!r}")
+        if fmt == "modelica" and self.epoch is None:
+            problems.append("data.epoch: required for Modelica tables (the instant of t = 0)")
+        only = {"time_column": "csv parquet", "time_format": "csv parquet", "delimiter": "csv"}
+        only |= {"decimal": "csv", "epoch": "modelica", "table": "modelica"}
+        for key, formats in only.items():
+            if key in given and fmt not in formats.split():
+                problems.append(
+                    f"data.{key}: only applies to format {formats.replace(' ', ' or ')}"
+                )
+        if fmt == "epw" and "time_zone" in given:
+            problems.append("data.time_zone: EPW files carry their own time zone; remove it")
+        if self.start and self.end and _utc(self.start, self.zone) >= _utc(self.end, self.zone):
+            problems.append(f"data.end: {self.end} is not after data.start {self.start}")
+        if self.delimiter == self.decimal:
+            problems.append(f"data.decimal: {self.decimal!r} is also the delimiter")
+        return problems
+
+    @property
+    def zone(self) -> tzinfo:
+        """The parsed time zone."""
+        return parse_time_zone(self.time_zone)
+
+
+def _utc(value: datetime, zone: tzinfo) -> pd.Timestamp:
+    ts = pd.Timestamp(value)
+    return ts.tz_convert("UTC") if ts.tz is not None else ts.tz_localize(zone).tz_convert("UTC")
+
+
+def column_problems(key: str, name: str, spec: ColumnSpec, fmt: str) -> list[str]:
+    """Problems of one ``[data.columns.<name>]`` entry, each prefixed with its key path.
+
+    Checks that ``name`` is a glossary name, that the unit is of its dimension
+    and that the source suits the file format.
+    """
+    quantity = glossary_quantity(name)
+    if quantity is None:
+        close = difflib.get_close_matches(name, list(GLOSSARY), n=1)
+        hint = f"did you mean {close[0]!r}?" if close else "see bayescal.glossary"
+        return [f"{key}: {name!r} is not a glossary name; {hint}"]
+    problems = []
+    try:
+        found = dimension_of(spec.unit)
+    except DataError as exc:
+        found = None
+        problems.append(f"{key}.unit: {exc.one_line()}")
+    if found is not None and found != quantity.dimension:
+        problems.append(
+            f"{key}.unit: {spec.unit!r} is a {found.replace('_', ' ')} unit, {name} is a "
+            f"{quantity.dimension.replace('_', ' ')}"
+        )
+    if spec.sign == -1 and quantity.dimension == "temperature":
+        problems.append(f"{key}.sign: -1 on a temperature makes no sense (fluxes, powers only)")
+    return problems + _source_problems(key, spec.source, fmt)
+
+
+def _source_problems(key: str, source: str | int, fmt: str) -> list[str]:
+    if fmt == "modelica" and (not isinstance(source, int) or source < 1):
+        return [
+            f"{key}.source: Modelica tables need a column index >= 1 (0 is time), got {source!r}"
+        ]
+    if fmt in ("csv", "parquet") and not isinstance(source, str):
+        return [f"{key}.source: give the column name for format {fmt!r}, got {source!r}"]
+    names = EPW_FIELDS[6:]
+    if fmt == "epw" and isinstance(source, int) and not 6 <= source < len(EPW_FIELDS):
+        return [
+            f"{key}.source: EPW data fields are numbered 6..{len(EPW_FIELDS) - 1}, got {source}"
+        ]
+    if fmt == "epw" and isinstance(source, str) and source not in names:
+        close = difflib.get_close_matches(source, names, n=1)
+        hint = f"did you mean {close[0]!r}?" if close else f"EPW fields: {', '.join(names)}"
+        return [f"{key}.source: {source!r} is not an EPW field; {hint}"]
+    return []

@@ -1,0 +1,98 @@
+"""The ``[parameters.<name>]`` tables: calibration parameters and the schema of their priors.
+
+:class:`UniformPriorSpec` and :class:`BetaPriorSpec` are the priors as a study
+file writes them; :meth:`Parameter.to_prior` turns one into the prior the
+numerical code uses (:class:`bayescal.design.Prior`), carrying the parameter's
+unit and description.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Annotated, Literal, Union
+
+from pydantic import Field, model_validator
+
+from bayescal.config.base import Section, field_doc
+
+if TYPE_CHECKING:
+    from bayescal.design import Prior
+
+__all__ = ["BetaPriorSpec", "Parameter", "PriorSpec", "UniformPriorSpec"]
+
+
+class UniformPriorSpec(Section):
+    """Uniform prior on ``[lower, upper]``."""
+
+    distribution: Literal["uniform"] = field_doc("Prior family.", "uniform")
+    lower: float = field_doc("Lower bound, in the parameter's unit.", 0.08, allow_inf_nan=False)
+    upper: float = field_doc("Upper bound, in the parameter's unit.", 0.16, allow_inf_nan=False)
+
+    @model_validator(mode="after")
+    def _bounds(self) -> UniformPriorSpec:
+        if not self.lower < self.upper:
+            raise ValueError(f"lower bound {self.lower} >= upper bound {self.upper}")
+        return self
+
+
+class BetaPriorSpec(UniformPriorSpec):
+    """Beta(a, b) prior stretched over ``[lower, upper]``."""
+
+    distribution: Literal["beta"] = field_doc("Prior family.", "beta")  # type: ignore[assignment]
+    a: float = field_doc("First shape parameter. [-]", 1.0, gt=0)
+    b: float = field_doc("Second shape parameter. [-]", 2.0, gt=0)
+
+
+PriorSpec = Annotated[
+    Union[UniformPriorSpec, BetaPriorSpec],  # noqa: UP007
+    Field(discriminator="distribution"),
+]
+"""A prior as the study file writes it, told apart by ``distribution``."""
+
+
+class Parameter(Section):
+    """``[parameters.<name>]``: one calibration parameter."""
+
+    unit: str = field_doc("Unit of nominal and bounds: the SI unit of the targets.", "W/(m·K)", "1")
+    nominal: float = field_doc("Nominal (catalogue) value, inside the bounds.", 0.12)
+    prior: PriorSpec = field_doc(
+        "Prior: {distribution = 'uniform', lower, upper} or {distribution = 'beta', lower, "
+        "upper, a, b}.",
+        {"distribution": "uniform", "lower": 0.08, "upper": 0.16},
+    )
+    targets: list[str] = field_doc(
+        "What the value sets: 'layer.property' or r_si, r_se, solar_absorptance (wall); a "
+        "constant name (box); 'ObjectType:ObjectName:Field' (energyplus; a name holding ':' "
+        "in double quotes); a template placeholder (command); an FMU variable (fmu); "
+        "'measured.<output>.offset' or '.gain' (any simulator: a sensor model, reading = "
+        "gain * simulated + offset). Several targets share one value.",
+        ["concrete.conductivity"],
+        ["board_out.specific_heat", "board_in.specific_heat"],
+        ["Material:AeratedConcrete:Conductivity"],
+        min_length=1,
+    )
+    description: str = field_doc("Text for reports.", "conductivity of the blocks", default="")
+
+    @model_validator(mode="after")
+    def _nominal_inside(self) -> Parameter:
+        lower, upper = self.prior.lower, self.prior.upper
+        if not lower <= self.nominal <= upper:
+            raise ValueError(
+                f"nominal {self.nominal} is outside the prior bounds [{lower}, {upper}]"
+            )
+        return self
+
+    def to_prior(self) -> Prior:
+        """The prior of :mod:`bayescal.design`, with this parameter's unit and description."""
+        from bayescal.design import prior_from_spec  # scipy.stats.qmc: not needed to validate
+
+        spec = self.prior
+        a, b = getattr(spec, "a", None), getattr(spec, "b", None)
+        return prior_from_spec(
+            spec.distribution,
+            spec.lower,
+            spec.upper,
+            a,
+            b,
+            unit=self.unit,
+            description=self.description,
+        )

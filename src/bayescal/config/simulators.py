@@ -1,0 +1,217 @@
+"""The ``[simulator]`` section of the study file: one frozen model per simulator type.
+
+:data:`SimulatorSection` is the union, told apart by ``type``: ``"wall"`` and
+``"box"`` (the built-in finite-volume models, here), ``"energyplus"`` (an
+EnergyPlus model, IDF or epJSON; :mod:`bayescal.config.energyplus`),
+``"command"`` (any external program fed by rendered templates) and ``"fmu"``
+(a co-simulation FMU; both in :mod:`bayescal.config.external`). A new
+simulator type is one more class, added to the union, plus a builder in
+:mod:`bayescal.config.build`. What each section tells before a run (targets
+and their kinds, outputs, inputs) is defined in :mod:`bayescal.config.targets`.
+"""
+
+from __future__ import annotations
+
+from typing import Annotated, Literal, Union
+
+from pydantic import Field, field_validator, model_validator
+
+from bayescal.config.base import IDENTIFIER, Section, field_doc, raise_problems, suggestion
+from bayescal.config.energyplus import EnergyPlusSection
+from bayescal.config.external import CommandSection, FmuSection
+from bayescal.config.targets import SimulatorBase
+from bayescal.simulators.fvm import LAYER_PROPERTIES
+
+__all__ = ["BoxSimulator", "LayerSpec", "SimulatorSection", "WallSimulator"]
+
+
+class LayerSpec(Section):
+    """One layer of a wall, outside to inside."""
+
+    name: str = field_doc("Layer name, used in targets.", "concrete")
+    thickness: float = field_doc("Thickness. [m]", 0.15, gt=0)
+    conductivity: float = field_doc("Thermal conductivity. [W/(m·K)]", 0.12, gt=0)
+    density: float = field_doc("Density. [kg/m³]", 552.0, gt=0)
+    specific_heat: float = field_doc("Specific heat capacity. [J/(kg·K)]", 800.0, gt=0)
+
+    @field_validator("name")
+    @classmethod
+    def _name(cls, value: str) -> str:
+        if not IDENTIFIER.match(value):
+            raise ValueError(f"layer names are identifiers (letters, digits, _), got {value!r}")
+        return value
+
+
+class WallSimulator(SimulatorBase):
+    """``type = "wall"``: the built-in wall (:class:`bayescal.simulators.wall.MultilayerWall`)."""
+
+    type: Literal["wall"] = field_doc("Simulator type.", "wall")
+    layers: list[LayerSpec] = field_doc(
+        "Layers from the outside face to the inside face ([[simulator.layers]] tables).",
+        [
+            {
+                "name": "concrete",
+                "thickness": 0.15,
+                "conductivity": 0.12,
+                "density": 552.0,
+                "specific_heat": 800.0,
+            }
+        ],
+        min_length=1,
+    )
+    boundary: Literal["surface", "air"] = field_doc(
+        "'surface': measured surface temperatures imposed on both faces; 'air': air "
+        "temperatures through the surface resistances, plus absorbed solar outside.",
+        "air",
+        default="surface",
+    )
+    r_se: float = field_doc(
+        "Outside surface resistance (air boundary). [m²·K/W]", 0.04, default=0.04, gt=0
+    )
+    r_si: float = field_doc(
+        "Inside surface resistance (air boundary). [m²·K/W]", 0.13, default=0.13, gt=0
+    )
+    solar_absorptance: float = field_doc(
+        "Solar absorptance of the outside face; > 0 needs boundary 'air' and the boundary "
+        "condition poa_global_out. [-]",
+        0.6,
+        default=0.0,
+        ge=0,
+        le=1,
+    )
+    outputs: list[str] = field_doc(
+        "Series produced: heat_flux_in, heat_flux_out, temp_surf_out, temp_surf_in, and "
+        "temp_interface_<i> / heat_flux_interface_<i> at the interface between layers i-1 "
+        "and i (outside layer 0).",
+        ["heat_flux_in", "temp_interface_2"],
+        default=["heat_flux_in"],
+        min_length=1,
+    )
+    scheme: Literal["crank-nicolson", "backward-euler", "exact"] = field_doc(
+        "Time integration scheme.", "exact", default="crank-nicolson"
+    )
+    tolerance: float = field_doc(
+        "Relative error bound of the periodic response down to the period of two clock "
+        "steps; it chooses mesh and sub-steps. [-]",
+        1e-3,
+        default=1e-2,
+        gt=0,
+        le=0.25,
+    )
+    cells: list[int] | None = field_doc(
+        "Cells per layer, overriding tolerance.", [4, 10, 4], default=None
+    )
+
+    @model_validator(mode="after")
+    def _consistent(self) -> WallSimulator:
+        from bayescal.simulators.wall import allowed_outputs
+
+        names = [layer.name for layer in self.layers]
+        allowed = allowed_outputs(len(names))
+        problems = [
+            f"simulator.outputs: {out!r} is not a wall output{suggestion(out, allowed)}"
+            for out in self.outputs
+            if out not in allowed
+        ]
+        if len(set(names)) != len(names):
+            problems.append(f"simulator.layers: layer names must be unique, got {names}")
+        if len(set(self.outputs)) != len(self.outputs):
+            problems.append(f"simulator.outputs: repeated names in {self.outputs}")
+        if self.boundary == "surface" and self.solar_absorptance > 0:
+            problems.append(
+                "simulator.solar_absorptance: > 0 needs boundary = 'air' (imposed surface "
+                "temperatures already contain the solar gains)"
+            )
+        if self.cells is not None and (len(self.cells) != len(names) or min(self.cells) < 1):
+            problems.append(f"simulator.cells: one count >= 1 per layer, got {self.cells}")
+        raise_problems(problems)
+        return self
+
+    def target_kinds(self) -> dict[str, str]:
+        kinds = {"thickness": "length"} | {p: p for p in LAYER_PROPERTIES if p != "thickness"}
+        found = {f"{layer.name}.{p}": kinds[p] for layer in self.layers for p in LAYER_PROPERTIES}
+        if self.boundary == "air":  # surface resistances and solar act only with air boundaries
+            found |= {"r_si": "resistance", "r_se": "resistance"}
+            found["solar_absorptance"] = "dimensionless"
+        return found
+
+    def output_names(self) -> tuple[str, ...]:
+        return tuple(self.outputs)
+
+    def input_names(self) -> tuple[str, ...]:
+        if self.boundary == "surface":
+            return ("temp_surf_out", "temp_surf_in")
+        solar = ("poa_global_out",) if self.solar_absorptance > 0 else ()
+        return ("temp_air_out", "temp_air_in", *solar)
+
+
+_BOX_KINDS = {"k_wall": "conductivity", "d_wall": "density", "c_wall": "specific_heat"}
+_BOX_KINDS |= {"r_ag": "resistance", "r_glass": "resistance", "c_internal": "capacity"}
+_BOX_KINDS |= {name: "length" for name in ("thickness", "side", "glazed_side")}
+_BOX_KINDS |= {f"h_in_{s}": "coefficient" for s in ("wall", "ceiling", "floor")}
+_BOX_KINDS |= {"h_out_a": "coefficient", "h_out_b": "wind_coefficient", "ua_leak": "conductance"}
+"""Kinds of the box constants; the others (t_w, emissivities, absorptivity, albedo) are [-]."""
+
+
+class BoxSimulator(SimulatorBase):
+    """``type = "box"``: the built-in test box (:class:`bayescal.simulators.box.TestBox`)."""
+
+    type: Literal["box"] = field_doc("Simulator type.", "box")
+    mode: Literal["coheating", "freefloat"] = field_doc(
+        "'coheating': indoor air temperature imposed, heating power computed; 'freefloat': "
+        "indoor air temperature computed (heat_input optional).",
+        "coheating",
+    )
+    latitude: float = field_doc("Site latitude, north positive. [°]", 50.69, ge=-90, le=90)
+    longitude: float = field_doc("Site longitude, east positive. [°]", 4.53, ge=-180, le=180)
+    altitude: float = field_doc("Site altitude. [m]", 100.0, default=0.0)
+    window_azimuth: float = field_doc(
+        "Azimuth the window faces, clockwise from north (180 = south). [°]",
+        180.0,
+        default=180.0,
+        ge=0,
+        lt=360,
+    )
+    constants: dict[str, float] = field_doc(
+        "Values overriding the box's nominal constants (bayescal.simulators.box.DEFAULTS: "
+        "k_wall [W/(m·K)], d_wall [kg/m³], c_wall [J/(kg·K)], r_ag [m²·K/W], t_w [-], "
+        "emissivity [-], absorptivity [-], geometry and surface coefficients).",
+        {"c_wall": 800.0, "emissivity": 0.85},
+        default_factory=dict,
+    )
+    cells: int = field_doc("Finite-volume cells across the wall.", 20, default=20, ge=1)
+    max_step: float = field_doc("Longest time step. [s]", 600.0, default=600.0, gt=0)
+    sky_model: Literal["isotropic", "haydavies", "perez"] = field_doc(
+        "Sky-diffuse transposition model.", "perez", default="haydavies"
+    )
+
+    @field_validator("constants")
+    @classmethod
+    def _known_constants(cls, value: dict[str, float]) -> dict[str, float]:
+        from bayescal.simulators.box import DEFAULTS
+
+        for name in value:
+            if name not in DEFAULTS:
+                raise ValueError(
+                    f"{name!r} is not a box constant{suggestion(name, list(DEFAULTS))}"
+                )
+        return value
+
+    def target_kinds(self) -> dict[str, str]:
+        from bayescal.simulators.box import DEFAULTS
+
+        return {name: _BOX_KINDS.get(name, "dimensionless") for name in DEFAULTS}
+
+    def output_names(self) -> tuple[str, ...]:
+        return ("heating_power",) if self.mode == "coheating" else ("temp_air_in",)
+
+    def input_names(self) -> tuple[str, ...]:
+        control = ("temp_air_in",) if self.mode == "coheating" else ()
+        return ("temp_air_out", "ghi", "dhi", "wind_speed", *control)
+
+
+SimulatorSection = Annotated[
+    Union[WallSimulator, BoxSimulator, EnergyPlusSection, CommandSection, FmuSection],  # noqa: UP007
+    Field(discriminator="type"),
+]
+"""The simulator union; a new simulator type is one more class here."""

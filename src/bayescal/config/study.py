@@ -1,0 +1,601 @@
+"""The study: ``study.toml`` validated into frozen pydantic models, and loading it.
+
+A study is a folder holding ``study.toml``; relative paths in it start at that
+folder. :func:`load_study` reads the file with :mod:`tomllib`, validates it
+into :class:`Study` and turns every problem into one
+:class:`~bayescal.errors.ConfigError` whose message lists each problem with
+its key path, the value received and what was expected, on one line
+(:mod:`bayescal.config.messages`).
+
+This module holds :class:`Study`, the small sections (``[study]``,
+``[outputs]``, ``[periods]``, ``[design]``, ``[emulator]``,
+``[calibration]``, ``[discrepancy]``, ``[predict]``, ``[runner]``) and the
+checks across sections; ``[data]``, ``[parameters]`` and ``[simulator]`` have
+modules of their own in :mod:`bayescal.config`.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import tomllib
+from datetime import timedelta
+from pathlib import Path
+from typing import TYPE_CHECKING, Annotated, Any, Literal
+
+from pydantic import (
+    BeforeValidator,
+    PrivateAttr,
+    ValidationError,
+    ValidationInfo,
+    field_validator,
+    model_validator,
+)
+
+from bayescal.clock import format_duration, parse_duration
+from bayescal.config.base import (
+    IDENTIFIER,
+    Duration,
+    Section,
+    field_doc,
+    raise_problems,
+    resolve_path,
+)
+from bayescal.config.data import DataSection
+from bayescal.config.messages import format_errors
+from bayescal.config.parameters import Parameter
+from bayescal.config.simulators import SimulatorSection
+from bayescal.config.targets import KIND_UNITS, SENSOR_PREFIX, normal_unit, parse_sensor_target
+from bayescal.errors import ConfigError
+from bayescal.glossary import GLOSSARY
+from bayescal.mcmc.nuts import NUTS_MIN_WARMUP
+from bayescal.optional import module_installed
+from bayescal.units import same_scale
+
+if TYPE_CHECKING:
+    from bayescal.design import Prior
+
+__all__ = [
+    "NUTS_MIN_WARMUP",
+    "STUDY_FILE",
+    "CalibrationSection",
+    "DesignSection",
+    "DiscrepancySection",
+    "EmulatorSection",
+    "OutputsSection",
+    "PeriodsSection",
+    "PredictSection",
+    "RunnerSection",
+    "Study",
+    "StudySection",
+    "load_study",
+    "study_from_dict",
+]
+
+STUDY_FILE = "study.toml"
+
+
+# --------------------------------------------------------------------------- small sections
+
+
+class StudySection(Section):
+    """``[study]``: name, output folder and master seed."""
+
+    name: str = field_doc("Name of the study, used in reports.", "paper-wall", min_length=1)
+    output_dir: Path = field_doc(
+        "Folder for artefacts, relative to the study folder (or absolute).",
+        "out",
+        default=Path("out"),
+        validate_default=True,
+    )
+    seed: int = field_doc(
+        "Master seed; stages without their own seed derive theirs.", 0, default=0, ge=0
+    )
+    description: str = field_doc("Free text shown in the report.", "Paper wall, 2012", default="")
+
+    @field_validator("output_dir")
+    @classmethod
+    def _inside(cls, value: Path, info: ValidationInfo) -> Path:
+        return resolve_path(value, info, "a folder name")
+
+
+class OutputsSection(Section):
+    """``[outputs]``: the measured outputs to calibrate on."""
+
+    calibrate: list[str] = field_doc(
+        "Glossary names of measured outputs, mapped in [data.columns] and produced by the "
+        "simulator.",
+        ["heat_flux_in"],
+        min_length=1,
+    )
+
+
+def _length(value: object) -> object:
+    if isinstance(value, int) and not isinstance(value, bool):
+        if value < 2:
+            raise ValueError(f"a period needs at least 2 samples, got {value}")
+        return value
+    return parse_duration(value).to_pytimedelta()
+
+
+class PeriodsSection(Section):
+    """``[periods]``: warm-up, period length and the held-out test window (give one of
+    ``test_samples`` and ``test_fraction``)."""
+
+    length: Annotated[timedelta | int, BeforeValidator(_length)] = field_doc(
+        "Period length: a duration (multiple of data.step) or a number of samples.",
+        "1D",
+        48,
+        default=timedelta(days=1),
+    )
+    warmup: Duration = field_doc(
+        "Stretch at the start that is simulated but not compared (initial conditions); a "
+        "multiple of data.step.",
+        "1D",
+        "0min",
+        default=timedelta(days=1),
+    )
+    test_samples: int | None = field_doc(
+        "Test window at the end, in samples.", 300, default=None, ge=0
+    )
+    test_fraction: float | None = field_doc(
+        "Test window at the end, as a fraction of the record.", 0.2, default=None, ge=0, lt=1
+    )
+
+    @model_validator(mode="after")
+    def _one_test(self) -> PeriodsSection:
+        if (self.test_samples is None) == (self.test_fraction is None):
+            both = self.test_samples is not None
+            raise ValueError(
+                "give exactly one of test_samples and test_fraction, got "
+                + (f"both ({self.test_samples}, {self.test_fraction})" if both else "neither")
+            )
+        if self.warmup < timedelta(0):
+            raise ValueError(f"warmup must not be negative, got {self.warmup}")
+        return self
+
+
+class DesignSection(Section):
+    """``[design]``: the Latin hypercube of simulator runs."""
+
+    runs: int = field_doc("Number of runs R (at least parameters + 2).", 30, default=30, ge=2)
+    seed: int | None = field_doc(
+        "Seed; derived from [study].seed if omitted.", 1, default=None, ge=0
+    )
+    optimization: Literal["none", "random-cd", "lloyd"] = field_doc(
+        "Space-filling optimisation of scipy.stats.qmc.LatinHypercube.", "none", default="random-cd"
+    )
+
+
+class EmulatorSection(Section):
+    """``[emulator]``: PCA bases and GP hyperparameters."""
+
+    pca_variance: float = field_doc(
+        "Output PCA: keep components up to this variance fraction (or pca_components).",
+        0.95,
+        default=0.90,
+        gt=0,
+        le=1,
+    )
+    pca_components: int | None = field_doc(
+        "Output PCA: fixed number of components.", 3, default=None, ge=1
+    )
+    input_pca_variance: float = field_doc(
+        "Boundary-condition PCA: variance fraction kept per series.", 0.9, default=0.90, gt=0, le=1
+    )
+    history_periods: int = field_doc(
+        "Preceding periods whose boundary conditions also enter the variable inputs x "
+        "(0: the paper's x, the current period only). A massive wall or room answers to "
+        "the weather of the days before; 1 lets the emulator predict periods unlike the "
+        "training ones (the wall example's test-window emulator MSE fell from 0.39 to "
+        "0.022 (W/m²)²).",
+        1,
+        default=0,
+        ge=0,
+        le=7,
+    )
+    burn: int = field_doc(
+        "Hyperparameter MCMC burn-in sweeps per chain (2 chains). The emulator uses the "
+        "MAP (best draw refined by L-BFGS-B); on the wall example 2 x (500 + 1000) and "
+        "2 x (1000 + 2000) sweeps gave the same MAP and leave-one-run-out RMSE.",
+        500,
+        default=500,
+        ge=0,
+    )
+    samples: int = field_doc("Hyperparameter MCMC sweeps kept per chain.", 1000, default=1000, ge=1)
+    algebra: Literal["kronecker", "dense"] = field_doc(
+        "Linear algebra: fast Kronecker or the dense reference.", "dense", default="kronecker"
+    )
+
+    @model_validator(mode="after")
+    def _one_rule(self) -> EmulatorSection:
+        if self.pca_components is not None and "pca_variance" in self.model_fields_set:
+            raise ValueError("give pca_variance or pca_components, not both")
+        return self
+
+
+class CalibrationSection(Section):
+    """``[calibration]``: MCMC for theta* and the precisions."""
+
+    chains: int = field_doc("Independent chains (>= 4 for R-hat).", 4, default=4, ge=4)
+    burn: int = field_doc("Burn-in iterations per chain.", 2000, default=2000, ge=0)
+    samples: int = field_doc("Iterations kept per chain.", 5000, default=5000, ge=1)
+    seed: int | None = field_doc(
+        "Seed; derived from [study].seed if omitted.", 2, default=None, ge=0
+    )
+    sampler: Literal["mwg", "nuts"] = field_doc(
+        "MCMC sampler: 'mwg' (Metropolis-within-Gibbs) or 'nuts' (No-U-Turn with JAX, in a "
+        'spawned process; needs `pip install "bayescal[hmc]"`; burn is its warm-up, 500 '
+        "burn + 1000 samples are plenty; no checkpoints). 'mwg' is the default: on the "
+        "virtual wall (30 runs x 25 days, benchmarks/bench_hmc.py) NUTS drew about 3.8x "
+        "the bulk ESS of theta* per CPU second while sampling, but its fixed cost (JIT "
+        "compilation 5-6.5 CPU s, process start-up 2 s) left a whole default-length "
+        "calibration no faster (min ESS per CPU second 386 vs 389, about 10 s each), and "
+        "'mwg' needs no extra package and resumes from checkpoints.",
+        "nuts",
+        default="mwg",
+    )
+
+
+class DiscrepancySection(Section):
+    """``[discrepancy]``: the difference process Delta(x) (the paper's eqs. 18–25)."""
+
+    enabled: bool = field_doc("Estimate Delta(x).", True, default=False)
+    realisations: int = field_doc("Posterior realisations b per update.", 50, default=50, ge=2)
+    update_interval: int = field_doc("MCMC iterations between updates.", 100, default=100, ge=1)
+    burn: int | None = field_doc(
+        "Burn-in iterations per chain of the discrepancy phase (Metropolis-within-Gibbs "
+        "with Delta updates, whatever [calibration] sampler says); [calibration] burn if "
+        "omitted. Set it when the calibration uses 'nuts', whose short runs are too short "
+        "for random-walk chains.",
+        4000,
+        default=None,
+        ge=0,
+    )
+    samples: int | None = field_doc(
+        "Iterations kept per chain of the discrepancy phase; [calibration] samples if omitted.",
+        10000,
+        default=None,
+        ge=1,
+    )
+
+
+class PredictSection(Section):
+    """``[predict]``: calibrated predictions on the training and test windows."""
+
+    draws: int = field_doc(
+        "Posterior draws (thinned evenly over all chains) propagated through the emulator.",
+        300,
+        default=300,
+        ge=20,
+    )
+    level: float = field_doc(
+        "Probability of the prediction band. [-]", 0.95, default=0.95, gt=0, lt=1
+    )
+    method: Literal["emulator", "simulator"] = field_doc(
+        "Calibrated predictions from the emulator at `draws` posterior draws, or from "
+        "the simulator re-run at `runs` posterior draws (exact physics, honest on test "
+        "periods whose conditions the training periods did not span; costs `runs` runs). "
+        "With a discrepancy, the corrected prediction adds Delta to the same kind of "
+        "prediction (for 'simulator': runs at draws of the Delta phase's theta*).",
+        "simulator",
+        default="emulator",
+    )
+    runs: int = field_doc(
+        "Posterior draws at which the simulator is re-run (method = 'simulator').",
+        50,
+        default=50,
+        ge=10,
+    )
+
+
+class RunnerSection(Section):
+    """``[runner]``: where simulator runs execute."""
+
+    backend: Literal["serial", "processes", "dask"] = field_doc(
+        "Execution backend.", "dask", default="processes"
+    )
+    jobs: int | None = field_doc("Parallel workers; all cores if omitted.", 4, default=None, ge=1)
+    scheduler: str | None = field_doc(
+        "Dask scheduler address (dask only); a LocalCluster if omitted.",
+        "tcp://10.0.0.5:8786",
+        default=None,
+    )
+    timeout: float | None = field_doc("Time limit per run. [s]", 600.0, default=None, gt=0)
+    retries: int = field_doc("Retries of a failed run.", 1, default=0, ge=0)
+
+    @model_validator(mode="after")
+    def _scheduler_for_dask(self) -> RunnerSection:
+        if self.scheduler is not None and self.backend != "dask":
+            raise ValueError(f"scheduler applies to backend 'dask', not {self.backend!r}")
+        return self
+
+
+# --------------------------------------------------------------------------- the study
+
+
+class Study(Section):
+    """A validated study file; build it with :func:`load_study`.
+
+    ``data.file``, ``study.output_dir`` and the simulator's paths (model,
+    weather or FMU file) are absolute (relative ones were resolved against
+    the study folder :attr:`root`); :attr:`path` is the file.
+    """
+
+    study: StudySection = field_doc("Name, output folder and seed.")
+    data: DataSection = field_doc("Measured data.")
+    simulator: SimulatorSection = field_doc("The simulator and its fixed inputs.")
+    parameters: dict[str, Parameter] = field_doc("Calibration parameters by name (at least one).")
+    outputs: OutputsSection = field_doc("Measured outputs to calibrate on.")
+    periods: PeriodsSection = field_doc("Warm-up, periods and test window.")
+    design: DesignSection = field_doc("Latin hypercube.", default_factory=DesignSection)
+    emulator: EmulatorSection = field_doc("Emulator.", default_factory=EmulatorSection)
+    calibration: CalibrationSection = field_doc(
+        "Calibration MCMC.", default_factory=CalibrationSection
+    )
+    discrepancy: DiscrepancySection = field_doc(
+        "Difference process.", default_factory=DiscrepancySection
+    )
+    predict: PredictSection = field_doc("Predictions with bands.", default_factory=PredictSection)
+    runner: RunnerSection = field_doc("Simulation runner.", default_factory=RunnerSection)
+
+    _root: Path = PrivateAttr(default_factory=Path.cwd)
+    _path: Path | None = PrivateAttr(default=None)
+
+    @property
+    def root(self) -> Path:
+        """The study folder."""
+        return self._root
+
+    @property
+    def path(self) -> Path:
+        """The study file (``root / "study.toml"`` for a study built in code)."""
+        return self._path if self._path is not None else self._root / STUDY_FILE
+
+    @property
+    def boundary_conditions(self) -> tuple[str, ...]:
+        """Mapped columns that are not calibrated outputs."""
+        return tuple(n for n in self.data.columns if n not in self.outputs.calibrate)
+
+    def priors(self) -> dict[str, Prior]:
+        """Parameter name -> prior (:class:`bayescal.design.Prior`), with unit and description."""
+        return {name: parameter.to_prior() for name, parameter in self.parameters.items()}
+
+    @field_validator("parameters")
+    @classmethod
+    def _parameter_names(cls, value: dict[str, Parameter]) -> dict[str, Parameter]:
+        if not value:
+            raise ValueError("no parameters; define at least one [parameters.<name>] table")
+        bad = [name for name in value if not IDENTIFIER.match(name)]
+        if bad:
+            raise ValueError(f"parameter names are identifiers (letters, digits, _), got {bad}")
+        return value
+
+    @model_validator(mode="after")
+    def _cross_checks(self) -> Study:
+        problems = _target_problems(self) + _output_problems(self) + _period_problems(self)
+        problems += _sampler_problems(self)
+        if self.design.runs < len(self.parameters) + 2:
+            problems.append(
+                f"design.runs: {self.design.runs} runs for {len(self.parameters)} parameters; "
+                f"at least {len(self.parameters) + 2} are needed"
+            )
+        raise_problems(problems)
+        return self
+
+    def discrepancy_lengths(self) -> tuple[int, int]:
+        """Burn-in and kept iterations per chain of the discrepancy phase.
+
+        ``[discrepancy] burn`` and ``samples`` where given, else ``[calibration]``'s.
+        """
+        d, cal = self.discrepancy, self.calibration
+        return (
+            cal.burn if d.burn is None else d.burn,
+            cal.samples if d.samples is None else d.samples,
+        )
+
+    def config_hash(self) -> str:
+        """SHA-256 (hex) of the canonical JSON of the validated configuration.
+
+        Paths inside the study folder enter relative to it, so moving the
+        folder keeps the hash; changing any value changes it.
+        """
+        dumped = self.model_dump(mode="json")
+        keys = [("data", "file"), ("study", "output_dir")]
+        keys += [("simulator", key) for key in self.simulator.path_keys]
+        for section, key in keys:
+            path = Path(dumped[section][key])
+            if path.is_absolute() and path.is_relative_to(self.root):
+                dumped[section][key] = path.relative_to(self.root).as_posix()
+        text = json.dumps(dumped, sort_keys=True, separators=(",", ":"), ensure_ascii=False)
+        return hashlib.sha256(text.encode()).hexdigest()
+
+
+def _target_problems(study: Study) -> list[str]:
+    simulator = study.simulator
+    problems: list[str] = []
+    owner: dict[str, str] = {}
+    for name, parameter in study.parameters.items():
+        key = f"parameters.{name}"
+        kinds: set[str] = set()
+        sensors = [t.startswith(SENSOR_PREFIX) for t in parameter.targets]
+        if any(sensors) and not all(sensors):
+            problems.append(
+                f"{key}.targets: mixes a sensor target ('measured.…') with simulator "
+                "targets; give the sensor its own parameter"
+            )
+            continue
+        for target, sensor in zip(parameter.targets, sensors, strict=True):
+            try:
+                if sensor:
+                    problems += _sensor_problems(study, key, parameter.unit, target)
+                    kind, canonical = None, target
+                else:
+                    kind = simulator.target_kind(target)
+                    canonical = simulator.target_key(target)
+            except ValueError as exc:
+                problems.append(f"{key}.targets: {exc}")
+                continue
+            if canonical in owner:
+                problems.append(f"{key}.targets: {target!r} is already set by {owner[canonical]!r}")
+            owner[canonical] = name
+            kinds |= {kind} if kind is not None else set()
+        found = sorted(kinds)
+        if len(found) > 1:
+            problems.append(f"{key}.targets: mixes quantities of different kinds {found}")
+        elif found and normal_unit(parameter.unit) not in KIND_UNITS[found[0]][0]:
+            problems.append(
+                f"{key}.unit: {parameter.unit!r} is not the unit of its targets "
+                f"({found[0].replace('_', ' ')}); write values in {KIND_UNITS[found[0]][1]!r}"
+            )
+    return problems
+
+
+def _sensor_problems(study: Study, key: str, unit: str, target: str) -> list[str]:
+    """Problems of one ``measured.<output>.<offset|gain>`` target.
+
+    A malformed target or an output not calibrated on raises ValueError (reported
+    under ``targets``); a wrong unit is returned (reported under ``unit``).
+    """
+    sensor = parse_sensor_target(target)
+    assert sensor is not None  # the caller checked the prefix
+    output, prop = sensor
+    if output not in study.outputs.calibrate:
+        raise ValueError(
+            f"'measured.{output}.{prop}': {output!r} is not calibrated on; outputs.calibrate "
+            f"lists {', '.join(study.outputs.calibrate)}"
+        )
+    if prop == "gain":
+        if normal_unit(unit) not in KIND_UNITS["dimensionless"][0]:
+            return [f'{key}.unit: a gain is dimensionless; write unit = "1", got {unit!r}']
+        return []
+    quantity = GLOSSARY.get(output)
+    if quantity is not None and not same_scale(unit, quantity.dimension):
+        return [
+            f"{key}.unit: the offset of {output!r} takes its unit ({quantity.unit}), got {unit!r}"
+        ]
+    return []
+
+
+def _output_problems(study: Study) -> list[str]:
+    problems = []
+    produced, sim = study.simulator.output_names(), study.simulator.type
+    for name in study.outputs.calibrate:
+        if name not in study.data.columns:
+            problems.append(
+                f"outputs.calibrate: {name!r} is not mapped in [data.columns] (mapped: "
+                f"{', '.join(study.data.columns)})"
+            )
+        if produced and name not in produced:
+            problems.append(
+                f"outputs.calibrate: the {sim} simulator does not produce {name!r}; it "
+                f"produces {', '.join(produced)}"
+            )
+    for name in study.simulator.input_names():
+        if name not in study.data.columns:
+            problems.append(
+                f"data.columns: the {sim} simulator needs the boundary condition {name!r}; "
+                "map it to a column of the file"
+            )
+        elif name in study.outputs.calibrate:
+            problems.append(f"outputs.calibrate: {name!r} is an input of the {sim} simulator")
+    return problems
+
+
+def _period_problems(study: Study) -> list[str]:
+    step, periods = study.data.step, study.periods
+    checks = {"periods.warmup": periods.warmup}
+    if isinstance(periods.length, timedelta):
+        checks["periods.length"] = periods.length
+    problems = [
+        f"{key}: {format_duration(value)} is not a multiple of data.step {format_duration(step)}"
+        for key, value in checks.items()
+        if value % step
+    ]
+    if isinstance(periods.length, timedelta) and periods.length < 2 * step:
+        problems.append(f"periods.length: {format_duration(periods.length)} is under 2 steps")
+    return problems
+
+
+#: Warm-up iterations NUTS needs at least (its window adaptation fails on fewer).
+
+
+def _sampler_problems(study: Study) -> list[str]:
+    """What ``[calibration] sampler = "nuts"`` needs, checked before any stage runs."""
+    cal = study.calibration
+    if cal.sampler != "nuts":
+        return []
+    problems = []
+    missing = [m for m in ("jax", "blackjax") if not module_installed(m)]
+    if missing:
+        problems.append(
+            f"calibration.sampler: 'nuts' needs {' and '.join(missing)}, which "
+            f"{'is' if len(missing) == 1 else 'are'} not installed; "
+            'pip install "bayescal[hmc]", or set sampler = "mwg"'
+        )
+    if cal.burn < NUTS_MIN_WARMUP:
+        problems.append(
+            f"calibration.burn: {cal.burn} warm-up iterations for sampler 'nuts'; its step-size "
+            f"adaptation needs at least {NUTS_MIN_WARMUP} (500 is a good choice)"
+        )
+    if study.emulator.algebra != "kronecker":
+        problems.append(
+            f"calibration.sampler: 'nuts' evaluates the likelihood by the Kronecker route, "
+            f"got emulator.algebra = {study.emulator.algebra!r}; set it to 'kronecker' or "
+            "use sampler = 'mwg'"
+        )
+    return problems
+
+
+# --------------------------------------------------------------------------- loading
+
+
+def load_study(path: str | os.PathLike[str]) -> Study:
+    """Read and validate a study.
+
+    Parameters
+    ----------
+    path
+        ``study.toml`` or the folder holding it.
+
+    Raises
+    ------
+    ConfigError
+        For a missing file, a TOML syntax error (with its line) or any invalid
+        value; the message lists every problem found, on one line.
+    """
+    given = Path(path)
+    file = given / STUDY_FILE if given.is_dir() else given
+    if not file.is_file():
+        what = f"no {STUDY_FILE} in folder {given}" if given.is_dir() else "file not found"
+        raise ConfigError(what, hint="give the study file or its folder", source=str(file))
+    try:
+        raw = tomllib.loads(file.read_bytes().decode("utf-8"))
+    except UnicodeDecodeError as exc:
+        raise ConfigError(f"not UTF-8 text (byte {exc.start})", source=str(file)) from None
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"invalid TOML: {exc}", source=str(file)) from None
+    study = study_from_dict(raw, root=file.resolve().parent, source=str(file))
+    study._path = file.resolve()
+    return study
+
+
+def study_from_dict(raw: dict[str, Any], *, root: Path, source: str = STUDY_FILE) -> Study:
+    """Validate the parsed content of a study file.
+
+    Parameters
+    ----------
+    raw
+        The parsed TOML.
+    root
+        Folder that relative paths start from.
+    source
+        Name used in error messages.
+    """
+    try:
+        study = Study.model_validate(raw, context={"root": Path(root)})
+    except ValidationError as exc:
+        raise ConfigError("; ".join(format_errors(exc, Study)), source=source) from None
+    study._root = Path(root)
+    return study
