@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import base64
 import dataclasses
+import html
 import io
 import re
 from pathlib import Path
@@ -18,6 +19,7 @@ import xarray as xr
 from bayescal.calibration.posterior import Posterior, calibrate
 from bayescal.emulator.assemble import Assembled, assemble
 from bayescal.emulator.gp import Emulator, LooResult, train
+from bayescal.metrics import KEY_COLUMNS, metric_columns
 from bayescal.pipeline.predict import (
     delta_series,
     metrics_table,
@@ -25,7 +27,7 @@ from bayescal.pipeline.predict import (
     predictions_dataset,
 )
 from bayescal.report import figures as fg
-from bayescal.report.html import ReportInputs, write_report
+from bayescal.report.html import ReportInputs, render, write_report
 from bayescal.runner import RunFailure
 from virtual_wall import PRIORS, VirtualExperiment, simulate, virtual_experiment
 
@@ -293,3 +295,14 @@ def test_blank_png_is_detected(tmp_path: Path) -> None:
     plt.close(fig)
     assert not _png_ok((tmp_path / "blank.png").read_bytes())
     assert not _png_ok(b"GIF89a" + bytes(100))
+
+
+def test_metric_tables_take_their_columns_from_the_one_list(parts: Parts) -> None:
+    inputs = _inputs(parts, with_delta=False, failures=False)
+    assert list(inputs.metrics.columns) == [
+        *KEY_COLUMNS,
+        *(c.name for c in metric_columns("csv")),
+    ]
+    text = render(inputs, [])
+    headers = [c.title.format(u="W/m²", u2="(W/m²)²") for c in metric_columns("report")]
+    assert "<th>model</th>" + "".join(f"<th>{html.escape(h)}</th>" for h in headers) in text

@@ -185,19 +185,22 @@ def simulate(study: Path, assignments: tuple[str, ...], out: Path | None) -> Non
 
 
 def metrics_table(train: dict[str, Any], test: dict[str, Any]) -> str:
-    """Plain-text table of fit metrics per output and window."""
-    head = (
-        f"{'output':<16}{'window':<8}{'n':>6}{'MSE':>11}{'RMSE':>10}{'mean|e|':>10}"
-        f"{'max|e|':>10}{'bias':>10}{'CV(RMSE)%':>11}{'NMBE%':>8}"
-    )
+    """Plain-text table of fit metrics per output and window (``bayescal simulate``)."""
+    from bayescal.metrics import metric_columns
+
+    columns = metric_columns("simulate")
+    head = f"{'output':<16}{'window':<8}" + "".join(f"{c.label:>{c.width}}" for c in columns)
     rows = [head]
     for window, metrics in (("train", train), ("test", test)):
         for name, m in metrics.items():
-            rows.append(
-                f"{name:<16}{window:<8}{m.n:>6}{m.mse:>11.4g}{m.rmse:>10.4g}"
-                f"{m.mean_abs_error:>10.4g}{m.max_abs_error:>10.4g}{m.bias:>10.3g}"
-                f"{m.cv_rmse:>11.3g}{m.nmbe:>8.3g}"
+            values = m.as_dict()
+            cells = "".join(
+                f"{values[c.name]:>{c.width}}"
+                if c.kind == "count"
+                else f"{values[c.name]:>{c.width}.{c.digits}g}"
+                for c in columns
             )
+            rows.append(f"{name:<16}{window:<8}{cells}")
     return "\n".join(rows)
 
 

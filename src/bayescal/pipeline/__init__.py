@@ -53,6 +53,7 @@ from bayescal.config import Study
 from bayescal.design import Design
 from bayescal.emulator.gp import LooResult
 from bayescal.errors import ConfigError
+from bayescal.metrics import KEY_COLUMNS, metric_columns
 from bayescal.pipeline.stages import (
     Context,
     EmulatorResult,
@@ -553,8 +554,7 @@ def describe(res: Results) -> str:
             )
     if res.predictions is not None:
         m = res.predictions.metrics
-        cols = ["output", "model", "window", "mse", "rmse", "mean_abs_error", "max_abs_error"]
-        cols += ["cv_rmse", "nmbe", "coverage95", "guideline14"]
+        cols = [*KEY_COLUMNS, *(c.name for c in metric_columns("show"))]
         lines += [
             "",
             "metrics (max_abs_error is the paper's 'MAE'; CV(RMSE), NMBE in %; guideline14: "

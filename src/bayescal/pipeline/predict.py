@@ -46,7 +46,13 @@ from bayescal.calibration.posterior import Posterior
 from bayescal.emulator.assemble import Assembled
 from bayescal.emulator.gp import Emulator
 from bayescal.glossary import GLOSSARY
-from bayescal.metrics import fit_metrics
+from bayescal.metrics import (
+    KEY_COLUMNS,
+    MODELS,
+    fit_metrics,
+    meets_guideline14,
+    metric_columns,
+)
 from bayescal.periods import PeriodLayout
 
 __all__ = [
@@ -58,12 +64,7 @@ __all__ = [
     "simulator_band",
 ]
 
-MODELS = ("nominal", "calibrated", "calibrated+delta")
 PAIRS_PER_CHUNK = 20_000
-#: ASHRAE Guideline 14 (2014) calibration criteria for hourly data: CV(RMSE) <= 30 %
-#: and |NMBE| <= 10 % (both with p = 1 degree of freedom, see bayescal.metrics).
-G14_CV_RMSE = 30.0
-G14_NMBE = 10.0
 
 
 class DiscrepancyModel(Protocol):
@@ -362,10 +363,7 @@ def metrics_table(ds: xr.Dataset) -> pd.DataFrame:
                     ok = np.isfinite(obs[mask])
                     inside = (obs[mask] >= lo) & (obs[mask] <= hi)
                     m["coverage95"] = float(np.mean(inside[ok])) if ok.any() else float("nan")
-                m["guideline14"] = bool(
-                    abs(m["cv_rmse"]) <= G14_CV_RMSE and abs(m["nmbe"]) <= G14_NMBE
-                )
+                m["guideline14"] = meets_guideline14(m["cv_rmse"], m["nmbe"])
                 rows.append({"output": o, "model": model, "window": window} | m)
-    columns = ["output", "model", "window", "n", "mse", "rmse", "mean_abs_error"]
-    columns += ["max_abs_error", "bias", "cv_rmse", "nmbe", "coverage95", "guideline14"]
+    columns = [*KEY_COLUMNS, *(c.name for c in metric_columns("csv"))]
     return pd.DataFrame(rows, columns=columns)
