@@ -306,3 +306,17 @@ def test_metric_tables_take_their_columns_from_the_one_list(parts: Parts) -> Non
     text = render(inputs, [])
     headers = [c.title.format(u="W/m²", u2="(W/m²)²") for c in metric_columns("report")]
     assert "<th>model</th>" + "".join(f"<th>{html.escape(h)}</th>" for h in headers) in text
+
+
+def test_posterior_table_shows_the_parameters_units(parts: Parts) -> None:
+    priors = {
+        name: dataclasses.replace(prior, unit="W/(m·K)" if name == "k_cb" else "")
+        for name, prior in parts.post.priors.items()
+    }
+    post = dataclasses.replace(parts.post, priors=priors)
+    inputs = dataclasses.replace(_inputs(parts, with_delta=False, failures=False), posterior=post)
+    text = render(inputs, [])
+    assert "<th>parameter</th><th>unit</th><th>mean</th>" in text
+    assert "<td>k_cb</td><td>W/(m·K)</td>" in text
+    assert "<td>cp_cb</td><td>–</td>" in text  # no unit given
+    assert "<td>lambda</td><td>–</td>" in text

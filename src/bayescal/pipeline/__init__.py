@@ -1,12 +1,13 @@
 """The end-to-end calibration: study file -> design -> ... -> report.
 
 :func:`run` executes the stages of :mod:`bayescal.pipeline.stages` in order,
-writing each stage's artefacts into the study's output folder atomically and
-recording the stage in ``stages.json`` (:mod:`bayescal.pipeline.state`).
-Running again reuses every stage whose key (settings and inputs) is unchanged
-and whose files exist; ``from_stage`` forces that stage and all later ones.
-The simulation runner additionally caches every finished run, so a killed
-``simulate`` stage resumes where it stopped.
+writing each stage's artefacts into the study's output folder through
+:mod:`bayescal.store` (atomically) and recording the stage in ``stages.json``
+(:mod:`bayescal.pipeline.state`). Running again reuses every stage whose key
+(settings and inputs) is unchanged and whose files exist; ``from_stage``
+forces that stage and all later ones. The simulation runner additionally
+caches every finished run, so a killed ``simulate`` stage resumes where it
+stopped.
 
 Output folder::
 
@@ -15,7 +16,8 @@ Output folder::
     simulations.npz/.json   the successful runs stacked, the failures listed
     emulator.nc             basis, standardisation, hyperparameters and draws
     emulator-cv.npz         leave-one-run-out cross-validation
-    posterior.nc            theta*, lambda, lambda* draws (ArviZ groups)
+    posterior.nc            theta*, lambda, lambda* draws (flat root group + ArviZ groups)
+    posterior-summary.csv   the posterior table, with units
     discrepancy.nc          the difference process (when enabled)
     predictions.nc          measured, nominal, calibrated (+ Delta) series
     metrics.csv             fit metrics per output, model and window
@@ -37,21 +39,10 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import pandas as pd
-import xarray as xr
 
-from bayescal.artefacts import load_emulator, load_posterior, save_emulator, save_posterior
-from bayescal.atomic import (
-    atomic_write,
-    atomic_write_json,
-    atomic_write_npz,
-    atomic_write_text,
-    read_json,
-    read_npz,
-)
 from bayescal.calibration.posterior import Posterior
 from bayescal.config import Study
 from bayescal.design import Design
-from bayescal.emulator.gp import LooResult
 from bayescal.errors import ConfigError
 from bayescal.metrics import KEY_COLUMNS, metric_columns
 from bayescal.pipeline.stages import (
@@ -69,7 +60,13 @@ from bayescal.pipeline.stages import (
     prepare,
 )
 from bayescal.pipeline.state import STAGES, StageLog, digest, file_logger
-from bayescal.runner import RunFailure, RunResults, forcing_fingerprint, simulator_fingerprint
+from bayescal.runner import RunResults, forcing_fingerprint, simulator_fingerprint
+from bayescal.store import design as design_store
+from bayescal.store import discrepancy as discrepancy_store
+from bayescal.store import emulator as emulator_store
+from bayescal.store import posterior as posterior_store
+from bayescal.store import predictions as predictions_store
+from bayescal.store import runs as runs_store
 
 if TYPE_CHECKING:
     from bayescal.discrepancy import Discrepancy
@@ -130,77 +127,6 @@ def stage_keys(ctx: Context) -> dict[str, str]:
     return keys
 
 
-# ---------------------------------------------------------------- artefact files
-
-
-def _save_simulations(out: Path, sims: RunResults) -> list[str]:
-    arrays: dict[str, Any] = {f"output:{k}": v for k, v in sims.outputs.items()}
-    arrays["indices"] = sims.indices
-    atomic_write_npz(out / "simulations.npz", arrays)
-    meta = {
-        "keys": list(sims.keys),
-        "failures": [dataclasses.asdict(f) for f in sims.failures],
-        "n_run": sims.n_run,
-        "n_cached": sims.n_cached,
-        "n_attempts": sims.n_attempts,
-    }
-    atomic_write_json(out / "simulations.json", meta)
-    return ["simulations.npz", "simulations.json"]
-
-
-def _load_simulations(out: Path, design: Design) -> RunResults:
-    arrays = read_npz(out / "simulations.npz")
-    meta = read_json(out / "simulations.json")
-    outputs = {k.split(":", 1)[1]: v for k, v in arrays.items() if k.startswith("output:")}
-    return RunResults(
-        design=design,
-        indices=arrays["indices"],
-        outputs=outputs,
-        keys=tuple(meta["keys"]),
-        failures=tuple(RunFailure(**f) for f in meta["failures"]),
-        n_run=0,
-        n_cached=int(arrays["indices"].size),
-        n_attempts=0,
-    )
-
-
-def _save_loo(path: Path, loo: LooResult) -> None:
-    names = list(loo.rmse)
-    atomic_write_npz(
-        path,
-        {
-            "names": np.array(names),
-            "rmse": np.array([loo.rmse[n] for n in names]),
-            "output_sd": np.array([loo.output_sd[n] for n in names]),
-            "rmse_run": loo.rmse_run,
-            "z": loo.z,
-        },
-    )
-
-
-def _load_loo(path: Path) -> LooResult:
-    a = read_npz(path)
-    names = [str(n) for n in a["names"]]
-    return LooResult(
-        rmse=dict(zip(names, map(float, a["rmse"]), strict=True)),
-        output_sd=dict(zip(names, map(float, a["output_sd"]), strict=True)),
-        rmse_run=a["rmse_run"],
-        z=a["z"],
-    )
-
-
-def _save_dataset(path: Path, ds: xr.Dataset) -> None:
-    def write(f: Any) -> None:
-        f.write(ds.to_netcdf())
-
-    atomic_write(path, write)
-
-
-def _load_dataset(path: Path) -> xr.Dataset:
-    with xr.open_dataset(path) as ds:
-        return ds.load()
-
-
 # ---------------------------------------------------------------- the stages
 
 
@@ -249,19 +175,19 @@ class _Runner:
 
 
 def _design(r: _Runner) -> Design:
-    path = r.out / "design.csv"
+    path = r.out / design_store.FILE
     if r.reuse("design"):
-        return Design.load(path)
+        return design_store.load_design(path)
     start = time.perf_counter()
     design = make_design(r.ctx)
-    design.save(path)
-    r.finish("design", ["design.csv"], start)
+    design_store.save_design(design, path)
+    r.finish("design", [design_store.FILE], start)
     return design
 
 
 def _simulations(r: _Runner, design: Design) -> RunResults:
     if r.reuse("simulate"):
-        return _load_simulations(r.out, design)
+        return runs_store.load_simulations(r.out, design)
     start = time.perf_counter()
     from bayescal.pipeline.stages import simulate
 
@@ -270,41 +196,55 @@ def _simulations(r: _Runner, design: Design) -> RunResults:
         r.logger.warning("run %d failed (%s): %s", f.index, f.error_type, f.message)
     if sims.failures:
         r.say(f"simulate: {len(sims.failures)} of {design.runs} runs failed and are dropped")
-    files = _save_simulations(r.out, sims)
+    files = runs_store.save_simulations(r.out, sims)
     r.finish("simulate", files, start)
     return sims
 
 
+def _parameter_units(ctx: Context) -> list[str]:
+    return [prior.unit for prior in ctx.priors.values()]
+
+
+def _load_emulator(ctx: Context, sims: RunResults) -> EmulatorResult:
+    return EmulatorResult(
+        assemble_runs(ctx, sims),
+        emulator_store.load_emulator(ctx.out / emulator_store.FILE),
+        emulator_store.load_emulator_cv(ctx.out / emulator_store.CV_FILE),
+    )
+
+
 def _emulator(r: _Runner, sims: RunResults) -> EmulatorResult:
     if r.reuse("emulator"):
-        assembled = assemble_runs(r.ctx, sims)
-        return EmulatorResult(
-            assembled, load_emulator(r.out / "emulator.nc"), _load_loo(r.out / "emulator-cv.npz")
-        )
+        return _load_emulator(r.ctx, sims)
     start = time.perf_counter()
     em = build_emulator(r.ctx, sims, r.checkpoints("emulator"))
-    save_emulator(em.emulator, r.out / "emulator.nc", r.ctx.study.config_hash())
-    _save_loo(r.out / "emulator-cv.npz", em.loo)
+    emulator_store.save_emulator(
+        em.emulator,
+        r.out / emulator_store.FILE,
+        r.ctx.study.config_hash(),
+        parameter_units=_parameter_units(r.ctx),
+    )
+    emulator_store.save_emulator_cv(em.loo, r.out / emulator_store.CV_FILE)
     for name, rmse in em.loo.rmse.items():
         r.say(
             f"emulator: leave-one-run-out RMSE of {name} {rmse:.4g} "
             f"(output SD {em.loo.output_sd[name]:.4g}); {em.emulator.basis.p} basis vectors"
         )
-    r.finish("emulator", ["emulator.nc", "emulator-cv.npz"], start)
+    r.finish("emulator", [emulator_store.FILE, emulator_store.CV_FILE], start)
     return em
 
 
 def _calibration(r: _Runner, em: EmulatorResult) -> Posterior:
     if r.reuse("calibrate"):
-        return load_posterior(r.out / "posterior.nc")
+        return posterior_store.load_posterior(r.out / posterior_store.FILE)
     start = time.perf_counter()
     post = calibrate_stage(r.ctx, em, checkpoint_dir=r.checkpoints("calibrate"))
-    save_posterior(post, r.out / "posterior.nc", r.ctx.study.config_hash())
-    atomic_write_text(r.out / "posterior-summary.csv", post.summary().to_csv())
+    posterior_store.save_posterior(post, r.out / posterior_store.FILE, r.ctx.study.config_hash())
+    posterior_store.save_posterior_summary(post, r.out / posterior_store.SUMMARY_FILE)
     for w in post.warnings:
         r.logger.warning("calibration: %s", w)
         r.say(f"warning: {w}")
-    r.finish("calibrate", ["posterior.nc", "posterior-summary.csv"], start)
+    r.finish("calibrate", [posterior_store.FILE, posterior_store.SUMMARY_FILE], start)
     return post
 
 
@@ -313,15 +253,14 @@ def _discrepancy(r: _Runner, em: EmulatorResult, post: Posterior) -> Discrepancy
         if not r.reuse("discrepancy"):
             r.finish("discrepancy", [], time.perf_counter())
         return None
-    from bayescal.discrepancy import load_discrepancy, save_discrepancy
-
+    path = r.out / discrepancy_store.FILE
     if r.reuse("discrepancy"):
-        return load_discrepancy(r.out / "discrepancy.nc")
+        return discrepancy_store.load_discrepancy(path)
     start = time.perf_counter()
     disc = discrepancy_stage(r.ctx, em, post)
     assert disc is not None  # enabled above
-    save_discrepancy(disc, r.out / "discrepancy.nc")
-    r.finish("discrepancy", ["discrepancy.nc"], start)
+    discrepancy_store.save_discrepancy(disc, path)
+    r.finish("discrepancy", [discrepancy_store.FILE], start)
     return disc
 
 
@@ -329,13 +268,11 @@ def _predictions(
     r: _Runner, em: EmulatorResult, post: Posterior, disc: Discrepancy | None
 ) -> Predictions:
     if r.reuse("predict"):
-        ds = _load_dataset(r.out / "predictions.nc")
-        return Predictions(ds, pd.read_csv(r.out / "metrics.csv"))
+        return Predictions(*predictions_store.load_predictions(r.out))
     start = time.perf_counter()
     pred = predict_stage(r.ctx, em, post, disc, nominal_run(r.ctx))
-    _save_dataset(r.out / "predictions.nc", pred.dataset)
-    atomic_write_text(r.out / "metrics.csv", pred.metrics.to_csv(index=False))
-    r.finish("predict", ["predictions.nc", "metrics.csv"], start)
+    files = predictions_store.save_predictions(r.out, pred.dataset, pred.metrics)
+    r.finish("predict", files, start)
     return pred
 
 
@@ -519,20 +456,15 @@ def load_results(study: Study) -> Results:
             f"{out} has no finished calibration (missing {', '.join(missing)})",
             hint=f"run `bayescal run {study.path}` first",
         )
-    design = Design.load(out / "design.csv")
-    sims = _load_simulations(out, design)
-    em = EmulatorResult(
-        assemble_runs(ctx, sims),
-        load_emulator(out / "emulator.nc"),
-        _load_loo(out / "emulator-cv.npz"),
-    )
+    design = design_store.load_design(out / design_store.FILE)
+    sims = runs_store.load_simulations(out, design)
+    em = _load_emulator(ctx, sims)
     disc = None
-    if (out / "discrepancy.nc").exists() and study.discrepancy.enabled:
-        from bayescal.discrepancy import load_discrepancy
-
-        disc = load_discrepancy(out / "discrepancy.nc")
-    pred = Predictions(_load_dataset(out / "predictions.nc"), pd.read_csv(out / "metrics.csv"))
-    return Results(ctx, design, sims, em, load_posterior(out / "posterior.nc"), disc, pred)
+    if (out / discrepancy_store.FILE).exists() and study.discrepancy.enabled:
+        disc = discrepancy_store.load_discrepancy(out / discrepancy_store.FILE)
+    pred = Predictions(*predictions_store.load_predictions(out))
+    post = posterior_store.load_posterior(out / posterior_store.FILE)
+    return Results(ctx, design, sims, em, post, disc, pred)
 
 
 def describe(res: Results) -> str:

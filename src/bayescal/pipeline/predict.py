@@ -289,6 +289,20 @@ def windows(layout: PeriodLayout) -> np.ndarray:
     return label.astype(str)
 
 
+_SERIES = {
+    "measured": "measured {what}",
+    "nominal": "{what} simulated at the nominal parameters",
+    "calibrated": "calibrated prediction of {what}: mean over posterior draws",
+    "calibrated_lower": "lower bound of the band of the calibrated prediction of {what}",
+    "calibrated_upper": "upper bound of the band of the calibrated prediction of {what}",
+    "delta": "discrepancy Delta = observation - model of {what} (mean)",
+    "corrected": "calibrated prediction of {what} corrected by Delta",
+    "corrected_lower": "lower bound of the band of the corrected prediction of {what}",
+    "corrected_upper": "upper bound of the band of the corrected prediction of {what}",
+}
+_WINDOW = "part of the record: warmup, train (training periods), test (test window) or unused"
+
+
 def predictions_dataset(
     times: np.ndarray,
     layout: PeriodLayout,
@@ -310,6 +324,7 @@ def predictions_dataset(
     data: dict[str, Any] = {}
     for o in measured:
         unit = GLOSSARY[o].unit if o in GLOSSARY else ""
+        what = f"{o} ({GLOSSARY[o].description})" if o in GLOSSARY else o
         series = {
             "measured": measured[o],
             "nominal": nominal[o],
@@ -325,13 +340,17 @@ def predictions_dataset(
                 "corrected_upper": corrected.upper[o],
             }
         for kind, values in series.items():
-            data[f"{o}_{kind}"] = ("time", np.asarray(values, dtype=float), {"units": unit})
+            text = _SERIES[kind].format(what=what)
+            attrs = {"units": unit, "long_name": f"{o} {kind}", "description": text}
+            data[f"{o}_{kind}"] = ("time", np.asarray(values, dtype=float), attrs)
     for b, values in boundary.items():
         unit = GLOSSARY[b].unit if b in GLOSSARY else ""
-        data[f"bc_{b}"] = ("time", np.asarray(values, dtype=float), {"units": unit})
+        text = f"boundary condition {b}" + (f": {GLOSSARY[b].description}" if b in GLOSSARY else "")
+        attrs = {"units": unit, "long_name": b, "description": text}
+        data[f"bc_{b}"] = ("time", np.asarray(values, dtype=float), attrs)
     coords = {
-        "time": np.asarray(times).astype("datetime64[ns]"),
-        "window": ("time", windows(layout)),
+        "time": ("time", np.asarray(times).astype("datetime64[ns]"), {"description": "UTC"}),
+        "window": ("time", windows(layout), {"description": _WINDOW}),
     }
     meta = {"outputs": ",".join(measured), "boundary": ",".join(boundary)}
     return xr.Dataset(data, coords=coords, attrs=meta | dict(attrs or {}))

@@ -415,9 +415,11 @@ def _ess(value: object) -> str:
 
 def _posterior_table(post: Posterior) -> str:
     table = post.summary()
+    units = {name: prior.unit for name, prior in post.priors.items()}
     rows = [
         [
             name,
+            units.get(str(name)) or "–",
             _num(r["mean"], 5),
             _num(r["sd"], 3),
             _num(r["lower"], 5),
@@ -428,17 +430,18 @@ def _posterior_table(post: Posterior) -> str:
         ]
         for name, r in table.iterrows()
     ]
-    header = ["parameter", "mean", "sd", "2.5 %", "97.5 %", "R-hat", "ESS bulk", "ESS tail"]
+    header = ["parameter", "unit", "mean", "sd", "2.5 %", "97.5 %", "R-hat"]
+    header += ["ESS bulk", "ESS tail"]
     return _table(header, rows)
 
 
 def _parameters(inputs: ReportInputs) -> str:
     note = (
         '<p class="note">Posterior mean, standard deviation and central 95 % credible '
-        "interval in the parameters' units; <code>lambda</code> and <code>lambda_star</code> "
-        "are the precisions of the simulator's out-of-basis part and of the measurement "
-        "error (standardised units). R-hat should be ≤ 1.01 and both ESS ≥ 400. All draws: "
-        "<code>posterior_draws.csv</code>.</p>"
+        "interval in the parameters' units (column unit); <code>lambda</code> and "
+        "<code>lambda_star</code> are the precisions of the simulator's out-of-basis part "
+        "and of the measurement error (standardised units). R-hat should be ≤ 1.01 and "
+        "both ESS ≥ 400. All draws: <code>posterior_draws.csv</code>.</p>"
     )
     return note + _posterior_table(inputs.posterior)
 
