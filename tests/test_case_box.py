@@ -17,10 +17,10 @@ import numpy as np
 import pytest
 
 from bayescal import examples
-from bayescal.cli import copy_example
 from bayescal.config import load_study
 from bayescal.config_simulators import BoxSimulator
 from bayescal.data.measured import load_measured
+from bayescal.examples import copy_example
 from bayescal.pipeline import Options, Results, run
 
 SERIAL = Options(backend="serial", chains_backend="serial")

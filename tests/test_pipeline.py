@@ -15,7 +15,7 @@ from bayescal.config import load_study
 from bayescal.demo import TRUTH
 from bayescal.errors import ConfigError
 from bayescal.pipeline import Options, Results, load_results, run
-from bayescal.pipeline.state import STAGES
+from bayescal.store.stages import STAGES
 
 SERIAL = Options(backend="serial", chains_backend="serial")
 #: Short chains: enough for the sharply identified parameters of the example.

@@ -7,7 +7,8 @@ import pytest
 from click.testing import CliRunner
 
 from bayescal import examples
-from bayescal.cli import main, metrics_table
+from bayescal.cli import main
+from bayescal.cli.progress import metrics_text
 from bayescal.config import load_study
 from bayescal.demo import TRUTH, run_demo
 from bayescal.errors import ConfigError
@@ -98,7 +99,7 @@ def test_metrics_text_keeps_the_tutorials_layout() -> None:
     # The table of `bayescal simulate` as docs/tutorial.md shows it (columns from the one
     # list in bayescal.metrics).
     m = Metrics(1188, 0.02289, 0.1513, 0.1263, 0.4218, 0.115, 1.82, 1.38)
-    text = metrics_table({"heat_flux_in": m}, {})
+    text = metrics_text({"heat_flux_in": m}, {})
     assert text.splitlines() == [
         "output          window       n        MSE      RMSE   mean|e|    max|e|      bias"
         "  CV(RMSE)%   NMBE%",

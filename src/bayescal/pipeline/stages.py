@@ -33,6 +33,7 @@ from bayescal.design import Design, Prior, latin_hypercube, prior_from_spec
 from bayescal.emulator.assemble import Assembled, assemble
 from bayescal.emulator.gp import Emulator, LooResult, train
 from bayescal.errors import SimulatorError
+from bayescal.pipeline.keys import derived_seed
 from bayescal.pipeline.predict import (
     Band,
     delta_series,
@@ -41,7 +42,6 @@ from bayescal.pipeline.predict import (
     predictions_dataset,
     simulator_band,
 )
-from bayescal.pipeline.state import derived_seed
 from bayescal.runner import Progress, RunResults, run_design
 from bayescal.simulators.base import Simulator
 from bayescal.simulators.factory import build_simulator, nominal_parameters

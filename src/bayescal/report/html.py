@@ -71,7 +71,7 @@ figcaption{font-size:.9em;color:#444}code{background:#f6f6f6;padding:0 .2em}
 
 @dataclass(frozen=True)
 class ReportInputs:
-    """Everything the report shows (built by the pipeline).
+    """Everything the report shows (built by :func:`bayescal.report.study.write_study_report`).
 
     Attributes
     ----------

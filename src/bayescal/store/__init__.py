@@ -19,7 +19,7 @@ Output folder (the module that writes and reads each file)::
     metrics.csv             fit metrics per output, model and window     store.predictions
     report/report.html      the report (figures in report/figures/)      bayescal.report
     checkpoints/            MCMC snapshots of an unfinished stage        bayescal.calibration
-    stages.json             what finished, with which key                bayescal.pipeline
+    stages.json             what finished, with which key, how long      store.stages
     bayescal.log            the log of every run                         bayescal.pipeline
 """
 
@@ -34,8 +34,11 @@ from bayescal.store.posterior import (
 )
 from bayescal.store.predictions import load_predictions, save_predictions
 from bayescal.store.runs import load_simulations, save_simulations
+from bayescal.store.stages import STAGES, StageLog
 
 __all__ = [
+    "STAGES",
+    "StageLog",
     "load_design",
     "load_discrepancy",
     "load_emulator",
