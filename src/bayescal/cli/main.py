@@ -225,7 +225,7 @@ def run(
 @STUDY
 @user_errors
 def show(study: Path) -> None:
-    """Summarise a finished calibration: posterior, diagnostics, metrics."""
+    """Summarise a calibration: posterior, diagnostics, metrics (what has run so far)."""
     from bayescal.cli.progress import describe
     from bayescal.config import load_study
     from bayescal.pipeline import load_results

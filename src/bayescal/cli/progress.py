@@ -97,7 +97,7 @@ def metrics_text(train: Mapping[str, Metrics], test: Mapping[str, Metrics]) -> s
 
 
 def describe(res: Results) -> str:
-    """A terminal summary: posterior table, diagnostics, metrics."""
+    """A terminal summary: posterior table, diagnostics, metrics, and what is not there yet."""
     lines = [f"study {res.context.study.study.name!r} -> {res.context.out}"]
     if res.posterior is not None:
         table = res.posterior.summary()
@@ -126,6 +126,13 @@ def describe(res: Results) -> str:
     if res.simulations is not None and res.simulations.failures:
         lines += ["", f"{len(res.simulations.failures)} failed run(s):"]
         lines += [f"  run {f.index}: {f.error_type}: {f.message}" for f in res.simulations.failures]
+    missing = res.missing()
+    if missing:
+        lines += [
+            "",
+            f"not run yet: {', '.join(missing)} "
+            f"(`bayescal run {res.context.study.path}` runs them)",
+        ]
     return "\n".join(lines)
 
 

@@ -4,12 +4,13 @@
 writing each stage's artefacts into the study's output folder through
 :mod:`bayescal.store` and recording the stage in ``stages.json``
 (:class:`bayescal.store.stages.StageLog`). Running again reuses every stage
-whose key (:mod:`bayescal.pipeline.keys`) is unchanged and whose files exist;
-``from_stage`` forces that stage and all later ones. The simulation runner
-additionally caches every finished run, so a killed ``simulate`` stage resumes
-where it stopped.
+whose key (:mod:`bayescal.pipeline.keys`) is unchanged and whose files exist,
+and says how long it took when it ran; ``from_stage`` forces that stage and
+all later ones. The simulation runner additionally caches every finished run,
+so a killed ``simulate`` stage resumes where it stopped.
 
-:func:`load_results` reads back the artefacts of a finished run.
+:func:`load_results` reads back what a study's output folder holds, after
+whichever stage it stopped.
 """
 
 from __future__ import annotations
@@ -62,7 +63,7 @@ LOG_FILE = "bayescal.log"
 
 @dataclass
 class Results:
-    """What a run produced (stages not reached are ``None``)."""
+    """What a run produced, or what an output folder holds (stages not reached are ``None``)."""
 
     context: Context
     design: Design | None = None
@@ -74,6 +75,22 @@ class Results:
     report: Path | None = None
     reused: tuple[str, ...] = ()
     ran: tuple[str, ...] = ()
+
+    def missing(self) -> tuple[str, ...]:
+        """The stages whose result is not here, in stage order (``discrepancy`` only
+        where the study enables it)."""
+        have = {
+            "design": self.design,
+            "simulate": self.simulations,
+            "emulator": self.emulator,
+            "calibrate": self.posterior,
+            "discrepancy": self.discrepancy,
+            "predict": self.predictions,
+            "report": self.report,
+        }
+        if not self.context.study.discrepancy.enabled:
+            have.pop("discrepancy")
+        return tuple(stage for stage, value in have.items() if value is None)
 
 
 def file_logger(folder: Path) -> logging.Logger:
@@ -115,11 +132,19 @@ class _Runner:
         ok = not self.stale and self.log.done(stage, self.keys[stage])
         if ok:
             self.reused.append(stage)
-            self._note(f"{stage}: up to date, reused")
+            self._note(f"{stage}: up to date, reused{self._when(stage)}")
         else:
             self.stale = True
             self._note(f"{stage}: running")
         return ok
+
+    def _when(self, stage: str) -> str:
+        """`` (ran 38.2 s on 2026-11-25 10:31)`` from the record, ``""`` if it does not say."""
+        last = self.log.last_run(stage)
+        if last is None:
+            return ""
+        on = "" if last.finished is None else f" on {last.finished:%Y-%m-%d %H:%M}"
+        return f" (ran {last.seconds:.1f} s{on})"
 
     def checkpoints(self, stage: str) -> Path:
         """Folder of the MCMC snapshots of ``stage`` (its key in the name)."""
@@ -258,7 +283,12 @@ def write_study_report(res: Results) -> Path:
     from bayescal.report.study import write_study_report as write
 
     if res.emulator is None or res.posterior is None or res.predictions is None:
-        raise ConfigError("the report needs the emulator, calibrate and predict stages")
+        missing = [s for s in res.missing() if s in ("emulator", "calibrate", "predict")]
+        raise ConfigError(
+            "the report needs the emulator, calibrate and predict stages; "
+            f"not run yet: {', '.join(missing)}",
+            hint=f"run `bayescal run {res.context.study.path}` first",
+        )
     sims = res.simulations
     design = res.design if res.design is not None else sims.design if sims is not None else None
     if design is None:  # pragma: no cover - the emulator stage needs the design
@@ -299,7 +329,9 @@ def run(
     options
         Backends, workers and progress callbacks (they do not change results).
     say
-        Receives one-line progress notes (default: discarded).
+        Receives one-line progress notes (default: discarded); a reused stage
+        says how long it ran: ``calibrate: up to date, reused (ran 38.2 s on
+        2026-11-25 10:31)``.
 
     Returns
     -------
@@ -349,34 +381,45 @@ def _need(value: Any) -> Any:
 
 
 def load_results(study: Study) -> Results:
-    """Read back the artefacts of a finished run without running anything.
+    """Read back what a study's output folder holds, without running anything.
+
+    The study may have stopped after any stage: the results of the stages
+    recorded as finished in ``stages.json`` (with their files there) are read,
+    in stage order up to the first one that is not; the others are ``None``
+    (:meth:`Results.missing` lists them). A stage forced to run again
+    (``--from``) counts as not finished until it has.
 
     Raises
     ------
     ConfigError
-        If the study has not been run up to the prediction stage.
+        If not even the design stage has finished.
     """
     ctx = prepare(study)
     out = ctx.out
-    needed = [
-        design_store.FILE,
-        runs_store.ARRAYS_FILE,
-        emulator_store.FILE,
-        posterior_store.FILE,
-        predictions_store.SERIES_FILE,
-    ]
-    missing = [f for f in needed if not (out / f).exists()]
-    if missing:
+    log = StageLog.open(out)
+    res = Results(ctx)
+    if not log.finished("design"):
         raise ConfigError(
-            f"{out} has no finished calibration (missing {', '.join(missing)})",
+            f"{out} has no finished calibration (no stage has finished)",
             hint=f"run `bayescal run {study.path}` first",
         )
-    design = design_store.load_design(out / design_store.FILE)
-    sims = runs_store.load_simulations(out, design)
-    em = _load_emulator(ctx, sims)
-    disc = None
-    if (out / discrepancy_store.FILE).exists() and study.discrepancy.enabled:
-        disc = discrepancy_store.load_discrepancy(out / discrepancy_store.FILE)
-    pred = Predictions(*predictions_store.load_predictions(out))
-    post = posterior_store.load_posterior(out / posterior_store.FILE)
-    return Results(ctx, design, sims, em, post, disc, pred)
+    res.design = design_store.load_design(out / design_store.FILE)
+    if not log.finished("simulate"):
+        return res
+    res.simulations = runs_store.load_simulations(out, res.design)
+    if not log.finished("emulator"):
+        return res
+    res.emulator = _load_emulator(ctx, res.simulations)
+    if not log.finished("calibrate"):
+        return res
+    res.posterior = posterior_store.load_posterior(out / posterior_store.FILE)
+    if not log.finished("discrepancy"):
+        return res
+    if study.discrepancy.enabled and (out / discrepancy_store.FILE).is_file():
+        res.discrepancy = discrepancy_store.load_discrepancy(out / discrepancy_store.FILE)
+    if not log.finished("predict"):
+        return res
+    res.predictions = Predictions(*predictions_store.load_predictions(out))
+    if log.finished("report") and (out / REPORT_FILE).is_file():
+        res.report = out / REPORT_FILE
+    return res

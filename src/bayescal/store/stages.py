@@ -12,17 +12,35 @@ from __future__ import annotations
 import time
 from collections.abc import Iterable
 from dataclasses import dataclass, field
+from datetime import datetime
 from pathlib import Path
 from typing import Any, Final
 
 from bayescal.atomic import atomic_write_json, read_json
 
-__all__ = ["RECORD", "STAGES", "StageLog"]
+__all__ = ["RECORD", "STAGES", "StageLog", "StageRun"]
 
 #: Stages in order (``--from`` takes one of these).
 STAGES: Final = ("design", "simulate", "emulator", "calibrate", "discrepancy", "predict", "report")
 RECORD: Final = "stages.json"
 _FINISHED = "%Y-%m-%dT%H:%M:%S%z"
+
+
+@dataclass(frozen=True)
+class StageRun:
+    """How a recorded stage ran.
+
+    Attributes
+    ----------
+    seconds
+        Wall time of the stage. [s]
+    finished
+        When it finished (the local time of the machine, with its UTC offset),
+        ``None`` where the record does not say.
+    """
+
+    seconds: float
+    finished: datetime | None
 
 
 @dataclass
@@ -47,10 +65,28 @@ class StageLog:
 
     def done(self, stage: str, key: str) -> bool:
         """Whether ``stage`` finished with ``key`` and its files are all there."""
+        rec = self.records.get(stage) or {}
+        return rec.get("key") == key and self.finished(stage)
+
+    def finished(self, stage: str) -> bool:
+        """Whether ``stage`` is recorded as finished (with any key) and its files are all there."""
         rec = self.records.get(stage)
-        if not rec or rec.get("key") != key:
+        if not rec:
             return False
         return all((self.folder / f).exists() for f in rec.get("files", []))
+
+    def last_run(self, stage: str) -> StageRun | None:
+        """How ``stage`` ran when it was recorded; ``None`` if the record does not say."""
+        rec = self.records.get(stage) or {}
+        try:
+            seconds = float(rec["seconds"])
+        except (KeyError, TypeError, ValueError):
+            return None
+        try:
+            finished: datetime | None = datetime.strptime(str(rec["finished"]), _FINISHED)
+        except (KeyError, ValueError):
+            finished = None
+        return StageRun(seconds, finished)
 
     def finish(self, stage: str, key: str, files: Iterable[str], seconds: float) -> None:
         """Record ``stage`` as finished (after its files are written)."""
