@@ -41,10 +41,11 @@ from pathlib import Path
 
 import pandas as pd
 
-from bayescal.cli import copy_example
+from bayescal.cli.progress import describe
 from bayescal.config import load_study
 from bayescal.errors import BayescalError
-from bayescal.pipeline import Options, Results, describe, run
+from bayescal.examples import copy_example
+from bayescal.pipeline import Options, Results, run
 
 REPO = Path(__file__).resolve().parents[1]
 SHARED_DATA = REPO.parent / "shared" / "data"

@@ -26,10 +26,10 @@ from pathlib import Path
 import numpy as np
 
 from bayescal.calibration.posterior import Posterior
-from bayescal.cli import copy_example
 from bayescal.config import load_study
 from bayescal.demo import PAPER, TRUTH
 from bayescal.design import BetaPrior
+from bayescal.examples import copy_example
 from bayescal.pipeline import Options, Results, run
 from bayescal.pipeline.stages import calibrate_stage, prepare
 

@@ -2,20 +2,25 @@
 
 from __future__ import annotations
 
+import dataclasses
+import json
 import os
 import stat
+import warnings
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 import pytest
 import xarray as xr
 
-from bayescal.artefacts import load_emulator, load_posterior, save_emulator, save_posterior
 from bayescal.calibration.posterior import Posterior, calibrate
 from bayescal.emulator.assemble import Assembled, assemble
 from bayescal.emulator.gp import Emulator
 from bayescal.emulator.training import train
 from bayescal.errors import DataError
+from bayescal.store.emulator import load_emulator, save_emulator
+from bayescal.store.posterior import load_posterior, save_posterior, save_posterior_summary
 from virtual_wall import virtual_experiment
 
 
@@ -111,3 +116,74 @@ def test_failed_write_keeps_the_old_file(
         save_emulator(em, path, config_hash="second")
     assert path.read_bytes() == before
     assert [p.name for p in tmp_path.iterdir()] == ["emulator.nc"]
+
+
+def _with_units(post: Posterior) -> Posterior:
+    """The posterior with units and descriptions on two of its priors (cp_fb has none)."""
+    given = {"k_cb": ("W/(m·K)", "conductivity of the blocks"), "cp_cb": ("J/(kg·K)", "")}
+    priors = {
+        name: dataclasses.replace(prior, unit=unit, description=text)
+        for name, prior in post.priors.items()
+        for unit, text in [given.get(name, ("", ""))]
+    }
+    return dataclasses.replace(post, priors=priors)
+
+
+def test_posterior_root_group_is_a_flat_dataset_with_units(
+    fitted: tuple[Assembled, Emulator, Posterior], tmp_path: Path
+) -> None:
+    post = _with_units(fitted[2])
+    path = save_posterior(post, tmp_path / "posterior.nc")
+    # What a user does first: open the file with xarray and see the draws.
+    with xr.open_dataset(path) as ds:
+        assert list(ds.data_vars) == [*post.names, "lambda", "lambda_star", "lp"]
+        for k, name in enumerate(post.names):
+            assert ds[name].dims == ("chain", "draw")
+            np.testing.assert_array_equal(ds[name].values, post.draws[..., k])
+            assert ds[name].attrs.get("units", "") == post.priors[name].unit
+        np.testing.assert_array_equal(ds["lambda_star"].values, post.lam_star)
+        np.testing.assert_array_equal(ds["lp"].values, post.log_density)
+        assert ds["k_cb"].attrs["units"] == "W/(m·K)"
+        assert ds["k_cb"].attrs["description"] == "conductivity of the blocks"
+        assert ds["lambda"].attrs["units"] == "1"
+        assert "precision" in ds["lambda_star"].attrs["description"]
+    # ... and ArviZ reads the same file as InferenceData.
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", FutureWarning)  # ArviZ's notice about its 1.0
+        import arviz
+
+    idata = arviz.from_netcdf(path)
+    assert {"posterior", "sample_stats", "bayescal"} <= set(idata.groups())
+    np.testing.assert_array_equal(idata["posterior"]["k_cb"].values, post.draws[..., 0])
+    assert idata["posterior"]["k_cb"].attrs["units"] == "W/(m·K)"
+    # The units travel through the priors back into the loaded posterior.
+    back = load_posterior(path)
+    assert back.priors == post.priors
+    np.testing.assert_array_equal(back.draws, post.draws)
+
+
+def test_posterior_summary_csv_has_units_and_descriptions(
+    fitted: tuple[Assembled, Emulator, Posterior], tmp_path: Path
+) -> None:
+    post = _with_units(fitted[2])
+    path = save_posterior_summary(post, tmp_path / "posterior-summary.csv")
+    table = pd.read_csv(path, index_col="parameter", keep_default_na=False)
+    assert list(table.index) == list(post.all_names)
+    assert table.loc["k_cb", "unit"] == "W/(m·K)"
+    assert table.loc["k_cb", "description"] == "conductivity of the blocks"
+    assert table.loc["cp_cb", "unit"] == "J/(kg·K)"
+    assert table.loc["lambda", "unit"] == "1"
+    np.testing.assert_allclose(table["mean"].to_numpy(float), post.summary()["mean"], rtol=1e-15)
+
+
+def test_emulator_variables_carry_descriptions(
+    fitted: tuple[Assembled, Emulator, Posterior], tmp_path: Path
+) -> None:
+    em = fitted[1]
+    path = save_emulator(em, tmp_path / "emulator.nc", parameter_units=["W/(m·K)"] * 3)
+    with xr.open_dataset(path) as ds:
+        for name in ("k", "theta", "std_mean", "hyper_draws", "bc0_mean"):
+            assert ds[name].attrs["description"], name
+        assert ds["theta"].attrs["units"] == "1"
+        assert ds["std_mean"].attrs["units"] == "W/m²"  # the one output: heat_flux_in
+        assert json.loads(ds.attrs["parameter_units"]) == ["W/(m·K)"] * 3

@@ -17,9 +17,9 @@ import numpy as np
 import pytest
 
 from bayescal import examples
-from bayescal.cli import copy_example
 from bayescal.config import BoxSimulator, load_study
 from bayescal.data.measured import load_measured
+from bayescal.examples import copy_example
 from bayescal.pipeline import Options, Results, run
 
 SERIAL = Options(backend="serial", chains_backend="serial")

@@ -16,9 +16,9 @@ import pytest
 from scipy.optimize import least_squares
 
 from bayescal import examples
-from bayescal.cli import copy_example
 from bayescal.config import WallSimulator, load_study
 from bayescal.emulator.assemble import runs_to_columns
+from bayescal.examples import copy_example
 from bayescal.pipeline import Options, Results, run
 
 DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"

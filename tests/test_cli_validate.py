@@ -104,6 +104,31 @@ def test_console_script_subprocess(tmp_path: Path) -> None:
     assert bad.stderr.count("\n") == 1
 
 
+def test_python_m_bayescal_runs_the_command_line(tmp_path: Path) -> None:
+    # `python -m bayescal` is the console script without it (bayescal/__main__.py).
+    version = subprocess.run(
+        [sys.executable, "-m", "bayescal", "--version"], capture_output=True, text=True
+    )
+    assert version.returncode == 0, version.stderr
+    assert version.stdout.strip() == f"bayescal, version {__version__}"
+    ok = subprocess.run(
+        [sys.executable, "-m", "bayescal", "validate", str(FIXTURE)], capture_output=True, text=True
+    )
+    assert ok.returncode == 0, ok.stderr
+    assert "4 training periods" in ok.stdout
+    bad = subprocess.run(
+        [sys.executable, "-m", "bayescal", "validate", str(tmp_path)],
+        capture_output=True,
+        text=True,
+    )
+    assert bad.returncode == 2
+    assert bad.stderr.startswith("error: ")
+    helped = subprocess.run(
+        [sys.executable, "-m", "bayescal", "-h"], capture_output=True, text=True
+    )
+    assert helped.stdout.startswith("Usage: bayescal [OPTIONS] COMMAND")
+
+
 TWIN_STUDY = """
 [study]
 name = "twin-house-west-wall"

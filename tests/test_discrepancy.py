@@ -18,9 +18,7 @@ from bayescal.discrepancy import (
     default_priors,
     estimate_discrepancy,
     fit_delta_gp,
-    load_discrepancy,
     piled_up,
-    save_discrepancy,
 )
 from bayescal.discrepancy.delta_gp import hard_threshold
 from bayescal.discrepancy.phase import DeltaPhase, empirical_moments, gls_observations
@@ -28,6 +26,7 @@ from bayescal.emulator.assemble import Assembled, assemble
 from bayescal.emulator.gp import Emulator
 from bayescal.emulator.training import train
 from bayescal.errors import ConfigError
+from bayescal.store.discrepancy import load_discrepancy, save_discrepancy
 from virtual_wall import NOISE_VARIANCE, PER_DAY, VirtualExperiment, virtual_experiment
 
 BIAS_PER_KELVIN = 0.05  # injected sensor error per K of outdoor surface temperature [W/m²K]

@@ -8,7 +8,7 @@ import click
 import pytest
 
 from bayescal.cli import main
-from bayescal.cli_reference import cli_reference_markdown
+from bayescal.cli.reference import cli_reference_markdown
 
 ROOT = Path(__file__).resolve().parents[1]
 CLI_DOC = ROOT / "docs" / "cli.md"
@@ -16,7 +16,7 @@ CLI_DOC = ROOT / "docs" / "cli.md"
 
 def test_committed_cli_reference_is_current() -> None:
     assert CLI_DOC.read_text(encoding="utf-8") == cli_reference_markdown(), (
-        "docs/cli.md is stale: run `python -m bayescal.cli_reference > docs/cli.md`"
+        "docs/cli.md is stale: run `python -m bayescal.cli.reference > docs/cli.md`"
     )
 
 

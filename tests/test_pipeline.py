@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import datetime as dt
 import json
 import re
+import shutil
 from pathlib import Path
 
 import numpy as np
@@ -15,7 +17,7 @@ from bayescal.config import load_study
 from bayescal.demo import TRUTH
 from bayescal.errors import ConfigError
 from bayescal.pipeline import Options, Results, load_results, run
-from bayescal.pipeline.state import STAGES
+from bayescal.store.stages import STAGES
 
 SERIAL = Options(backend="serial", chains_backend="serial")
 #: Short chains: enough for the sharply identified parameters of the example.
@@ -195,3 +197,46 @@ def test_discrepancy_and_report_through_the_pipeline(tmp_path: Path) -> None:
     assert "Metropolis-within-Gibbs, 4 chains x (400 + 600)" in html
     assert "Metropolis-within-Gibbs with Delta updates, 4 chains x (300 + 500)" in html
     assert (folder / "out" / "discrepancy.nc").is_file()
+
+
+def test_a_study_stopped_after_the_emulator_loads_and_shows(
+    first: tuple[Path, Results], tmp_path: Path
+) -> None:
+    folder, res = first
+    copy = tmp_path / "wall"
+    shutil.copytree(folder, copy)
+    notes: list[str] = []
+    # Forcing calibrate and stopping before it leaves a study stopped after the emulator.
+    stopped = run(
+        load_study(copy), from_stage="calibrate", until="emulator", options=SERIAL, say=notes.append
+    )
+    assert stopped.ran == ()
+    assert stopped.reused == ("design", "simulate", "emulator")
+    # A reused stage says how long it took when it ran (from stages.json).
+    record = json.loads((copy / "out" / "stages.json").read_text())
+    assert set(record) == {"design", "simulate", "emulator"}
+    for stage in stopped.reused:
+        when = dt.datetime.strptime(record[stage]["finished"], "%Y-%m-%dT%H:%M:%S%z")
+        expected = (
+            f"{stage}: up to date, reused (ran {record[stage]['seconds']:.1f} s on "
+            f"{when:%Y-%m-%d %H:%M})"
+        )
+        assert expected in notes
+    loaded = load_results(load_study(copy))
+    assert loaded.emulator is not None
+    assert res.emulator is not None
+    assert loaded.emulator.loo.rmse == res.emulator.loo.rmse
+    assert (loaded.posterior, loaded.predictions, loaded.report) == (None, None, None)
+    assert loaded.missing() == ("calibrate", "predict", "report")
+    runner = CliRunner()
+    shown = runner.invoke(main, ["show", str(copy)])
+    assert shown.exit_code == 0, shown.output
+    assert "emulator leave-one-run-out RMSE" in shown.output
+    missing = [line for line in shown.output.splitlines() if "not run yet" in line]
+    assert len(missing) == 1
+    assert missing[0].startswith("not run yet: calibrate, predict, report")
+    report = runner.invoke(main, ["report", str(copy)])
+    assert report.exit_code == 2
+    assert report.output.count("\n") == 1
+    assert "the report needs the emulator, calibrate and predict stages" in report.output
+    assert "not run yet: calibrate, predict" in report.output

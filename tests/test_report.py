@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import base64
 import dataclasses
+import html
 import io
 import re
 from pathlib import Path
@@ -19,6 +20,7 @@ from bayescal.calibration.posterior import Posterior, calibrate
 from bayescal.emulator.assemble import Assembled, assemble
 from bayescal.emulator.gp import Emulator, LooResult
 from bayescal.emulator.training import train
+from bayescal.metrics import KEY_COLUMNS, metric_columns
 from bayescal.pipeline.predict import (
     delta_series,
     metrics_table,
@@ -26,7 +28,8 @@ from bayescal.pipeline.predict import (
     predictions_dataset,
 )
 from bayescal.report import figures as fg
-from bayescal.report.html import ReportInputs, write_report
+from bayescal.report.html import ReportInputs, render, write_report
+from bayescal.report.study import delta_correlation
 from bayescal.runner import RunFailure
 from virtual_wall import PRIORS, VirtualExperiment, simulate, virtual_experiment
 
@@ -294,3 +297,38 @@ def test_blank_png_is_detected(tmp_path: Path) -> None:
     plt.close(fig)
     assert not _png_ok((tmp_path / "blank.png").read_bytes())
     assert not _png_ok(b"GIF89a" + bytes(100))
+
+
+def test_posterior_table_shows_the_parameters_units(parts: Parts) -> None:
+    priors = {
+        name: dataclasses.replace(prior, unit="W/(m·K)" if name == "k_cb" else "")
+        for name, prior in parts.post.priors.items()
+    }
+    post = dataclasses.replace(parts.post, priors=priors)
+    inputs = dataclasses.replace(_inputs(parts, with_delta=False, failures=False), posterior=post)
+    text = render(inputs, [])
+    assert "<th>parameter</th><th>unit</th><th>mean</th>" in text
+    assert "<td>k_cb</td><td>W/(m·K)</td>" in text
+    assert "<td>cp_cb</td><td>–</td>" in text  # no unit given
+    assert "<td>lambda</td><td>–</td>" in text
+
+
+def test_metric_tables_take_their_columns_from_the_one_list(parts: Parts) -> None:
+    inputs = _inputs(parts, with_delta=False, failures=False)
+    assert list(inputs.metrics.columns) == [
+        *KEY_COLUMNS,
+        *(c.name for c in metric_columns("csv")),
+    ]
+    text = render(inputs, [])
+    headers = [c.title.format(u="W/m²", u2="(W/m²)²") for c in metric_columns("report")]
+    assert "<th>model</th>" + "".join(f"<th>{html.escape(h)}</th>" for h in headers) in text
+
+
+def test_delta_correlation_of_the_report(parts: Parts) -> None:
+    ds = _inputs(parts, with_delta=True, failures=False).predictions
+    table = delta_correlation(ds)
+    reference = _correlation(ds)  # the same Pearson r, written out here
+    assert list(table.index) == ["heat_flux_in"]
+    np.testing.assert_allclose(
+        table[reference.columns].to_numpy(float), reference.to_numpy(float), rtol=1e-12
+    )

@@ -13,10 +13,10 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from bayescal.artefacts import load_posterior
 from bayescal.cli import main
 from bayescal.mcmc.chains import run_chains
 from bayescal.mcmc.samplers.mwg import MetropolisWithinGibbs
+from bayescal.store.posterior import load_posterior
 
 SAMPLER = MetropolisWithinGibbs(n_burn=300, lower=[0.0, -np.inf], batch_size=25, max_adapt=0.1)
 

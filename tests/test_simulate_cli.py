@@ -8,10 +8,11 @@ from click.testing import CliRunner
 
 from bayescal import examples
 from bayescal.cli import main
+from bayescal.cli.progress import metrics_text
 from bayescal.config import build_simulator, load_study, nominal_parameters
 from bayescal.demo import TRUTH, run_demo
 from bayescal.errors import ConfigError
-from bayescal.metrics import fit_metrics
+from bayescal.metrics import Metrics, fit_metrics
 from bayescal.simulate import check_simulation
 
 
@@ -91,3 +92,16 @@ def test_demo_writes_figures(tmp_path: Path) -> None:
     figures = run_demo(tmp_path / "demo", calibrate=False, quiet=True)
     assert len(figures) == 2
     assert all(f.stat().st_size > 10_000 for f in figures)
+
+
+def test_metrics_text_keeps_the_tutorials_layout() -> None:
+    # The table of `bayescal simulate` as docs/tutorial.md shows it (columns from the one
+    # list in bayescal.metrics).
+    m = Metrics(1188, 0.02289, 0.1513, 0.1263, 0.4218, 0.115, 1.82, 1.38)
+    text = metrics_text({"heat_flux_in": m}, {})
+    assert text.splitlines() == [
+        "output          window       n        MSE      RMSE   mean|e|    max|e|      bias"
+        "  CV(RMSE)%   NMBE%",
+        "heat_flux_in    train     1188    0.02289    0.1513    0.1263    0.4218     0.115"
+        "       1.82    1.38",
+    ]

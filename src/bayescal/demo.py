@@ -16,10 +16,11 @@ import time
 from pathlib import Path
 
 from bayescal import pipeline
-from bayescal.cli import copy_example, metrics_table, summary
+from bayescal.cli.progress import describe, metrics_text, progress_options, study_summary
 from bayescal.config import load_study
 from bayescal.data import load_measured
 from bayescal.errors import BayescalError
+from bayescal.examples import copy_example
 from bayescal.simulate import check_simulation, write_simulation
 
 TRUTH = {"k_cb": 0.124, "cp_cb": 845.0, "cp_fb": 800.0}
@@ -35,7 +36,7 @@ def run_demo(folder: Path, *, calibrate: bool = True, quiet: bool = False) -> li
     say = (lambda _: None) if quiet else print
     copy_example("wall", folder, force=True)
     study = load_study(folder)
-    say(summary(study, load_measured(study)))
+    say(study_summary(study, load_measured(study)))
     figures = []
     for label, values in (("nominal", {}), ("truth", TRUTH)):
         t0 = time.perf_counter()
@@ -43,29 +44,20 @@ def run_demo(folder: Path, *, calibrate: bool = True, quiet: bool = False) -> li
         elapsed = time.perf_counter() - t0
         shown = ", ".join(f"{k}={v:g}" for k, v in check.parameters.items())
         say(f"\n{label} parameters ({shown}); load + simulate took {elapsed:.2f} s")
-        say(metrics_table(check.train, check.test))
+        say(metrics_text(check.train, check.test))
         files = write_simulation(check, study.study.output_dir / f"simulate-{label}", title=shown)
         figures.append(files["png"])
     if not calibrate:
         return figures
     say("\ncalibration (bayescal run):")
     t0 = time.perf_counter()
-    res = pipeline.run(study, options=_options(quiet), say=say)
-    say(pipeline.describe(res))
+    res = pipeline.run(study, options=pipeline.Options(**progress_options(quiet)), say=say)
+    say(describe(res))
     say(f"\ncalibration took {time.perf_counter() - t0:.1f} s")
     say(truth_table(res))
     if res.report is not None:
         figures.append(res.report)
     return figures
-
-
-def _options(quiet: bool) -> pipeline.Options:
-    from bayescal.cli import _mcmc_bar
-    from bayescal.runner import tqdm_progress
-
-    return pipeline.Options(
-        progress=None if quiet else tqdm_progress, mcmc_progress=_mcmc_bar(quiet)
-    )
 
 
 def truth_table(res: pipeline.Results) -> str:

@@ -20,18 +20,15 @@ may go. The prior density enters only the calibration, through
 
 from __future__ import annotations
 
-import csv
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any, ClassVar, Literal
 
 import numpy as np
 from scipy import special
 from scipy.stats import qmc
 
-from bayescal.atomic import atomic_write_json, atomic_write_text, read_json
 from bayescal.errors import ConfigError
 
 __all__ = [
@@ -46,7 +43,6 @@ __all__ = [
 
 Optimization = Literal["random-cd", "lloyd"]
 OPTIMIZATIONS: tuple[str, ...] = ("random-cd", "lloyd")
-DESIGN_FORMAT = "bayescal-design/1"
 
 
 def _finite(value: float, what: str) -> float:
@@ -344,62 +340,6 @@ class Design:
         frame = pd.DataFrame(self.values, columns=list(self.names))
         frame.index.name = "run"
         return frame
-
-    def _metadata(self) -> dict[str, Any]:
-        return {
-            "format": DESIGN_FORMAT,
-            "seed": self.seed,
-            "optimization": self.optimization,
-            "priors": {name: prior.spec() for name, prior in self.priors.items()},
-        }
-
-    def save(self, path: str | Path) -> Path:
-        """Write the design atomically as JSON (``.json``) or CSV (``.csv``).
-
-        JSON holds everything. CSV is a table with a column ``run``, the
-        physical values under the parameter names and the normalised values
-        under ``u:<name>``, preceded by one ``#`` line with the seed,
-        optimisation and priors as JSON. Both read back exactly with :meth:`load`.
-        """
-        import json
-
-        path = Path(path)
-        suffix = path.suffix.lower()
-        if suffix == ".json":
-            document = {**self._metadata(), "names": list(self.names)}
-            document |= {"unit": self.unit.tolist(), "values": self.values.tolist()}
-            return atomic_write_json(path, document)
-        if suffix == ".csv":
-            frame = self.to_frame()
-            for j, name in enumerate(self.names):
-                frame[f"u:{name}"] = self.unit[:, j]
-            header = "# " + json.dumps(self._metadata()) + "\n"
-            return atomic_write_text(path, header + frame.to_csv(lineterminator="\n"))
-        raise ConfigError(f"design file must end in .json or .csv, got {path.name!r}")
-
-    @classmethod
-    def load(cls, path: str | Path) -> Design:
-        """Read a design written by :meth:`save`."""
-        import json
-
-        path = Path(path)
-        if path.suffix.lower() == ".json":
-            document = read_json(path)
-            unit = np.array(document["unit"], dtype=float).reshape(-1, len(document["names"]))
-        elif path.suffix.lower() == ".csv":
-            with path.open(encoding="utf-8", newline="") as stream:
-                document = json.loads(stream.readline().lstrip("#"))
-                rows = list(csv.DictReader(stream))  # float() reads repr'd floats exactly
-            columns = [f"u:{name}" for name in document["priors"]]
-            unit = np.array([[float(r[c]) for c in columns] for r in rows]).reshape(
-                -1, len(columns)
-            )
-        else:
-            raise ConfigError(f"design file must end in .json or .csv, got {path.name!r}")
-        if document.get("format") != DESIGN_FORMAT:
-            raise ConfigError(f"{path}: not a bayescal design (format {document.get('format')!r})")
-        priors = {name: prior_from_spec(**spec) for name, spec in document["priors"].items()}
-        return cls(priors, unit, seed=document["seed"], optimization=document["optimization"])
 
 
 def latin_hypercube(

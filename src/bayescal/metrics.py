@@ -13,14 +13,42 @@ Definitions (``e = simulated - measured``, over the ``n`` scored samples):
   Both are undefined (NaN) where the measured mean is zero; CV(RMSE) divides by
   the absolute mean, so it stays positive for series with a negative mean (a
   heat flux out of a room).
+
+The prediction stage adds ``coverage95`` (share of measured samples inside the
+95 % band) and ``guideline14`` (:func:`meets_guideline14`).
+
+:data:`METRIC_COLUMNS` is the one list of metric columns: their names (the
+columns of ``metrics.csv``), labels, units and descriptions. Every table of
+metrics (``metrics.csv``, the report, ``bayescal show``, ``bayescal
+simulate``) takes its columns from it through :func:`metric_columns`; adding a
+metric means adding it here (and computing it).
 """
 
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass
+from typing import Final, Literal
 
 import numpy as np
 import numpy.typing as npt
+
+__all__ = [
+    "G14_CV_RMSE",
+    "G14_NMBE",
+    "KEY_COLUMNS",
+    "METRIC_COLUMNS",
+    "MODELS",
+    "MetricColumn",
+    "Metrics",
+    "fit_metrics",
+    "meets_guideline14",
+    "metric_columns",
+]
+
+#: ASHRAE Guideline 14 (2014) calibration criteria for hourly data: CV(RMSE) <= 30 %
+#: and |NMBE| <= 10 % (both with p = 1 degree of freedom).
+G14_CV_RMSE: Final = 30.0
+G14_NMBE: Final = 10.0
 
 
 @dataclass(frozen=True)
@@ -77,3 +105,134 @@ def fit_metrics(simulated: npt.ArrayLike, measured: npt.ArrayLike, *, p: int = 1
         cv_rmse=float(cv),
         nmbe=float(nmbe),
     )
+
+
+def meets_guideline14(cv_rmse: float, nmbe: float) -> bool:
+    """Whether CV(RMSE) <= 30 % and |NMBE| <= 10 % (ASHRAE Guideline 14, hourly data).
+
+    Written for whole-building energy use; shown for orientation only.
+    """
+    return bool(abs(cv_rmse) <= G14_CV_RMSE and abs(nmbe) <= G14_NMBE)
+
+
+Table = Literal["csv", "show", "report", "simulate"]
+
+
+@dataclass(frozen=True)
+class MetricColumn:
+    """One column of the metric tables.
+
+    Attributes
+    ----------
+    name
+        Column of ``metrics.csv`` (a field of :class:`Metrics`, ``coverage95``
+        or ``guideline14``).
+    label
+        Short label of the plain-text table of ``bayescal simulate``.
+    title
+        Header in the report; ``{u}`` stands for the output's unit, ``{u2}`` for its square.
+    unit
+        Unit in words: ``"{u}"`` (the output's), ``"{u2}"``, ``"%"``, ``"1"``
+        (a fraction) or ``""`` (a count or a yes/no).
+    description
+        What the column holds.
+    kind
+        ``"count"``, ``"number"`` or ``"flag"`` (how a table writes the value).
+    scale
+        Factor applied in the report (a fraction shown in %).
+    width, digits
+        Width and significant digits in the plain-text table of ``bayescal simulate``.
+    """
+
+    name: str
+    label: str
+    title: str
+    unit: str
+    description: str
+    kind: Literal["count", "number", "flag"] = "number"
+    scale: float = 1.0
+    width: int = 10
+    digits: int = 4
+
+
+#: Every metric column, in the order of ``metrics.csv``.
+METRIC_COLUMNS: Final = (
+    MetricColumn(
+        "n", "n", "n", "", "samples scored (measured and predicted finite)", "count", width=6
+    ),
+    MetricColumn("mse", "MSE", "MSE [{u2}]", "{u2}", "mean squared error", width=11),
+    MetricColumn("rmse", "RMSE", "RMSE [{u}]", "{u}", "root mean squared error"),
+    MetricColumn("mean_abs_error", "mean|e|", "mean abs error [{u}]", "{u}", "mean absolute error"),
+    MetricColumn(
+        "max_abs_error",
+        "max|e|",
+        "max abs error [{u}]",
+        "{u}",
+        "maximum absolute error (the paper's 'MAE')",
+    ),
+    MetricColumn("bias", "bias", "bias [{u}]", "{u}", "mean error, predicted - measured", digits=3),
+    MetricColumn(
+        "cv_rmse",
+        "CV(RMSE)%",
+        "CV(RMSE) [%]",
+        "%",
+        "coefficient of variation of the RMSE (ASHRAE Guideline 14, p = 1)",
+        width=11,
+        digits=3,
+    ),
+    MetricColumn(
+        "nmbe",
+        "NMBE%",
+        "NMBE [%]",
+        "%",
+        "normalised mean bias error (ASHRAE Guideline 14, p = 1); > 0 when the "
+        "model under-predicts",
+        width=8,
+        digits=3,
+    ),
+    MetricColumn(
+        "coverage95",
+        "cover95",
+        "coverage of 95 % band [%]",
+        "1",
+        "share of the measured samples inside the 95 % band",
+        scale=100.0,
+    ),
+    MetricColumn(
+        "guideline14",
+        "G14",
+        "meets Guideline 14",
+        "",
+        "CV(RMSE) <= 30 % and |NMBE| <= 10 % (ASHRAE Guideline 14, hourly)",
+        "flag",
+    ),
+)
+
+#: Columns that say which row a metric belongs to (before the metrics in ``metrics.csv``).
+KEY_COLUMNS: Final = ("output", "model", "window")
+#: The models scored (values of the ``model`` column), in table order.
+MODELS: Final = ("nominal", "calibrated", "calibrated+delta")
+
+_ERRORS = ("mse", "rmse", "mean_abs_error", "max_abs_error")
+_BANDS = ("coverage95", "guideline14")
+_TABLES: dict[str, tuple[str, ...]] = {
+    "csv": tuple(c.name for c in METRIC_COLUMNS),
+    "show": (*_ERRORS, "cv_rmse", "nmbe", *_BANDS),
+    # the report puts the paper's "MAE" (max abs error) before the mean absolute error
+    "report": ("n", "mse", "max_abs_error", "mean_abs_error", "cv_rmse", "nmbe", *_BANDS),
+    "simulate": ("n", *_ERRORS, "bias", "cv_rmse", "nmbe"),
+}
+
+
+def metric_columns(table: Table = "csv") -> tuple[MetricColumn, ...]:
+    """The columns of one table, in its order.
+
+    Parameters
+    ----------
+    table
+        ``"csv"`` (``metrics.csv``, every column), ``"show"`` (``bayescal show``),
+        ``"report"`` (the HTML report) or ``"simulate"`` (``bayescal simulate``,
+        the metrics of one run).
+    """
+    by_name = {c.name: c for c in METRIC_COLUMNS}
+    return tuple(by_name[name] for name in _TABLES[table])

@@ -14,11 +14,10 @@ import numpy as np
 import pandas as pd
 
 from bayescal.atomic import atomic_write_text
-from bayescal.config import Study
+from bayescal.config import Study, build_simulator, nominal_parameters
 from bayescal.data.measured import MeasuredData, load_measured
 from bayescal.errors import ConfigError
 from bayescal.metrics import Metrics, fit_metrics
-from bayescal.simulators.factory import build_simulator, nominal_parameters
 
 
 @dataclass(frozen=True)

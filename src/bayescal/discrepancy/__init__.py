@@ -12,18 +12,17 @@ the paper's eq. 25 writes the opposite sign). Modules:
 * :mod:`~bayescal.discrepancy.delta_gp` -- PCA of ``Delta`` and one GP over ``x``
   per component, to predict ``Delta`` on new periods;
 * :mod:`~bayescal.discrepancy.model` -- :func:`estimate_discrepancy` and
-  :class:`Discrepancy` (physical units);
-* :mod:`~bayescal.discrepancy.io` -- netCDF artefact.
+  :class:`Discrepancy` (physical units).
+
+The netCDF artefact is :mod:`bayescal.store.discrepancy`.
 
 ::
 
     disc = estimate_discrepancy(emulator, assembled, posterior)
     mean, var = disc.predict(assembled.x_test)      # (N, m_test), physical units
-    save_discrepancy(disc, "out/discrepancy.nc")
 """
 
 from bayescal.discrepancy.delta_gp import DeltaGP, fit_delta_gp
-from bayescal.discrepancy.io import load_discrepancy, save_discrepancy
 from bayescal.discrepancy.model import Discrepancy, estimate_discrepancy
 from bayescal.discrepancy.priors import default_priors, piled_up
 
@@ -33,7 +32,5 @@ __all__ = [
     "default_priors",
     "estimate_discrepancy",
     "fit_delta_gp",
-    "load_discrepancy",
     "piled_up",
-    "save_discrepancy",
 ]

@@ -46,7 +46,13 @@ from bayescal.calibration.posterior import Posterior
 from bayescal.emulator.assemble import Assembled
 from bayescal.emulator.gp import Emulator
 from bayescal.glossary import GLOSSARY
-from bayescal.metrics import fit_metrics
+from bayescal.metrics import (
+    KEY_COLUMNS,
+    MODELS,
+    fit_metrics,
+    meets_guideline14,
+    metric_columns,
+)
 from bayescal.periods import PeriodLayout
 
 __all__ = [
@@ -58,12 +64,7 @@ __all__ = [
     "simulator_band",
 ]
 
-MODELS = ("nominal", "calibrated", "calibrated+delta")
 PAIRS_PER_CHUNK = 20_000
-#: ASHRAE Guideline 14 (2014) calibration criteria for hourly data: CV(RMSE) <= 30 %
-#: and |NMBE| <= 10 % (both with p = 1 degree of freedom, see bayescal.metrics).
-G14_CV_RMSE = 30.0
-G14_NMBE = 10.0
 
 
 class DiscrepancyModel(Protocol):
@@ -288,6 +289,20 @@ def windows(layout: PeriodLayout) -> np.ndarray:
     return label.astype(str)
 
 
+_SERIES = {
+    "measured": "measured {what}",
+    "nominal": "{what} simulated at the nominal parameters",
+    "calibrated": "calibrated prediction of {what}: mean over posterior draws",
+    "calibrated_lower": "lower bound of the band of the calibrated prediction of {what}",
+    "calibrated_upper": "upper bound of the band of the calibrated prediction of {what}",
+    "delta": "discrepancy Delta = observation - model of {what} (mean)",
+    "corrected": "calibrated prediction of {what} corrected by Delta",
+    "corrected_lower": "lower bound of the band of the corrected prediction of {what}",
+    "corrected_upper": "upper bound of the band of the corrected prediction of {what}",
+}
+_WINDOW = "part of the record: warmup, train (training periods), test (test window) or unused"
+
+
 def predictions_dataset(
     times: np.ndarray,
     layout: PeriodLayout,
@@ -309,6 +324,7 @@ def predictions_dataset(
     data: dict[str, Any] = {}
     for o in measured:
         unit = GLOSSARY[o].unit if o in GLOSSARY else ""
+        what = f"{o} ({GLOSSARY[o].description})" if o in GLOSSARY else o
         series = {
             "measured": measured[o],
             "nominal": nominal[o],
@@ -324,13 +340,17 @@ def predictions_dataset(
                 "corrected_upper": corrected.upper[o],
             }
         for kind, values in series.items():
-            data[f"{o}_{kind}"] = ("time", np.asarray(values, dtype=float), {"units": unit})
+            text = _SERIES[kind].format(what=what)
+            attrs = {"units": unit, "long_name": f"{o} {kind}", "description": text}
+            data[f"{o}_{kind}"] = ("time", np.asarray(values, dtype=float), attrs)
     for b, values in boundary.items():
         unit = GLOSSARY[b].unit if b in GLOSSARY else ""
-        data[f"bc_{b}"] = ("time", np.asarray(values, dtype=float), {"units": unit})
+        text = f"boundary condition {b}" + (f": {GLOSSARY[b].description}" if b in GLOSSARY else "")
+        attrs = {"units": unit, "long_name": b, "description": text}
+        data[f"bc_{b}"] = ("time", np.asarray(values, dtype=float), attrs)
     coords = {
-        "time": np.asarray(times).astype("datetime64[ns]"),
-        "window": ("time", windows(layout)),
+        "time": ("time", np.asarray(times).astype("datetime64[ns]"), {"description": "UTC"}),
+        "window": ("time", windows(layout), {"description": _WINDOW}),
     }
     meta = {"outputs": ",".join(measured), "boundary": ",".join(boundary)}
     return xr.Dataset(data, coords=coords, attrs=meta | dict(attrs or {}))
@@ -362,10 +382,7 @@ def metrics_table(ds: xr.Dataset) -> pd.DataFrame:
                     ok = np.isfinite(obs[mask])
                     inside = (obs[mask] >= lo) & (obs[mask] <= hi)
                     m["coverage95"] = float(np.mean(inside[ok])) if ok.any() else float("nan")
-                m["guideline14"] = bool(
-                    abs(m["cv_rmse"]) <= G14_CV_RMSE and abs(m["nmbe"]) <= G14_NMBE
-                )
+                m["guideline14"] = meets_guideline14(m["cv_rmse"], m["nmbe"])
                 rows.append({"output": o, "model": model, "window": window} | m)
-    columns = ["output", "model", "window", "n", "mse", "rmse", "mean_abs_error"]
-    columns += ["max_abs_error", "bias", "cv_rmse", "nmbe", "coverage95", "guideline14"]
+    columns = [*KEY_COLUMNS, *(c.name for c in metric_columns("csv"))]
     return pd.DataFrame(rows, columns=columns)

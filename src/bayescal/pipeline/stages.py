@@ -27,13 +27,14 @@ import pandas as pd
 import xarray as xr
 
 from bayescal.calibration.posterior import Posterior, calibrate
-from bayescal.config import Study
+from bayescal.config import Study, build_simulator, nominal_parameters
 from bayescal.data.measured import MeasuredData, load_measured
 from bayescal.design import Design, Prior, latin_hypercube
 from bayescal.emulator.assemble import Assembled, assemble
 from bayescal.emulator.gp import Emulator, LooResult
 from bayescal.emulator.training import train
 from bayescal.errors import SimulatorError
+from bayescal.pipeline.keys import derived_seed
 from bayescal.pipeline.predict import (
     Band,
     delta_series,
@@ -42,10 +43,8 @@ from bayescal.pipeline.predict import (
     predictions_dataset,
     simulator_band,
 )
-from bayescal.pipeline.state import derived_seed
 from bayescal.runner import Progress, RunResults, run_design
 from bayescal.simulators.base import Simulator
-from bayescal.simulators.factory import build_simulator, nominal_parameters
 
 if TYPE_CHECKING:
     from bayescal.discrepancy import Discrepancy
@@ -62,7 +61,6 @@ __all__ = [
     "predict_stage",
     "prepare",
     "simulate",
-    "study_priors",
 ]
 
 Tick = Callable[[int], None]
@@ -114,16 +112,11 @@ class Context:
     @property
     def priors(self) -> dict[str, Prior]:
         """The study's priors, in parameter order."""
-        return study_priors(self.study)
+        return self.study.priors()
 
     def seed(self, stage: str, explicit: int | None = None) -> int:
         """The stage's seed: ``explicit`` or derived from the master seed."""
         return int(explicit) if explicit is not None else derived_seed(self.study.study.seed, stage)
-
-
-def study_priors(study: Study) -> dict[str, Prior]:
-    """Parameter name -> prior (:mod:`bayescal.design` objects) of a study."""
-    return study.priors()  # SHIM(issue 14): remove at integration (call Study.priors)
 
 
 def prepare(study: Study, options: Options | None = None) -> Context:

@@ -22,6 +22,7 @@ from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -33,6 +34,7 @@ from bayescal.calibration.posterior import Posterior
 from bayescal.design import Design
 from bayescal.emulator.gp import Emulator, LooResult
 from bayescal.glossary import GLOSSARY
+from bayescal.metrics import MODELS, MetricColumn, metric_columns
 from bayescal.report import figures as fg
 from bayescal.runner import RunFailure
 
@@ -50,7 +52,6 @@ SECTIONS = (
     "Design",
     "Settings",
 )
-MODELS = ("nominal", "calibrated", "calibrated+delta")
 WINDOWS = {"train": "training window", "test": "test window"}
 
 CSS = """
@@ -70,7 +71,7 @@ figcaption{font-size:.9em;color:#444}code{background:#f6f6f6;padding:0 .2em}
 
 @dataclass(frozen=True)
 class ReportInputs:
-    """Everything the report shows (built by the pipeline).
+    """Everything the report shows (built by :func:`bayescal.report.study.write_study_report`).
 
     Attributes
     ----------
@@ -414,9 +415,11 @@ def _ess(value: object) -> str:
 
 def _posterior_table(post: Posterior) -> str:
     table = post.summary()
+    units = {name: prior.unit for name, prior in post.priors.items()}
     rows = [
         [
             name,
+            units.get(str(name)) or "–",
             _num(r["mean"], 5),
             _num(r["sd"], 3),
             _num(r["lower"], 5),
@@ -427,29 +430,21 @@ def _posterior_table(post: Posterior) -> str:
         ]
         for name, r in table.iterrows()
     ]
-    header = ["parameter", "mean", "sd", "2.5 %", "97.5 %", "R-hat", "ESS bulk", "ESS tail"]
+    header = ["parameter", "unit", "mean", "sd", "2.5 %", "97.5 %", "R-hat"]
+    header += ["ESS bulk", "ESS tail"]
     return _table(header, rows)
 
 
 def _parameters(inputs: ReportInputs) -> str:
     note = (
         '<p class="note">Posterior mean, standard deviation and central 95 % credible '
-        "interval in the parameters' units; <code>lambda</code> and <code>lambda_star</code> "
-        "are the precisions of the simulator's out-of-basis part and of the measurement "
-        "error (standardised units). R-hat should be ≤ 1.01 and both ESS ≥ 400. All draws: "
-        "<code>posterior_draws.csv</code>.</p>"
+        "interval in the parameters' units (column unit); <code>lambda</code> and "
+        "<code>lambda_star</code> are the precisions of the simulator's out-of-basis part "
+        "and of the measurement error (standardised units). R-hat should be ≤ 1.01 and "
+        "both ESS ≥ 400. All draws: <code>posterior_draws.csv</code>.</p>"
     )
     return note + _posterior_table(inputs.posterior)
 
-
-METRIC_COLUMNS = (
-    ("mse", "MSE [{u2}]", 1.0),
-    ("max_abs_error", "max abs error [{u}]", 1.0),
-    ("mean_abs_error", "mean abs error [{u}]", 1.0),
-    ("cv_rmse", "CV(RMSE) [%]", 1.0),
-    ("nmbe", "NMBE [%]", 1.0),
-    ("coverage95", "coverage of 95 % band [%]", 100.0),
-)
 
 METRIC_NOTE = (
     '<p class="note">Errors are <i>predicted − measured</i> over the samples of each window. '
@@ -471,25 +466,29 @@ def _yes_no(value: object) -> str:
     return "yes" if bool(value) else "no"
 
 
+def _metric_cell(column: MetricColumn, value: Any) -> str:
+    if column.kind == "flag":
+        return _yes_no(value)
+    if column.kind == "count":
+        return _num(int(value))
+    return _num(float(value) * column.scale)
+
+
 def _metrics_block(metrics: pd.DataFrame, output: str, window: str) -> str:
     rows = metrics[(metrics["output"] == output) & (metrics["window"] == window)]
     if rows.empty:
         return ""
     unit = _unit(output) or "-"
     squared = f"({unit})²" if re.search(r"[/·*^²³ ]", unit) else f"{unit}²"
-    header = ["model", "n", *(h.format(u=unit, u2=squared) for _, h, _ in METRIC_COLUMNS)]
-    guideline = "guideline14" in rows.columns
-    if guideline:
-        header.append("meets Guideline 14")
+    # older runs lack newer columns: those are left out
+    columns = [c for c in metric_columns("report") if c.name in rows.columns]
+    header = ["model", *(c.title.format(u=unit, u2=squared) for c in columns)]
     order = [m for m in MODELS if m in set(rows["model"])]
     order += [m for m in rows["model"].unique() if m not in order]
     body = []
     for model in order:
         r = rows[rows["model"] == model].iloc[0]
-        cells = [_num(float(r[c]) * scale) for c, _, scale in METRIC_COLUMNS]
-        cells.insert(0, _num(int(r["n"])))
-        if guideline:
-            cells.append(_yes_no(r["guideline14"]))
+        cells = [_metric_cell(c, r[c.name]) for c in columns]
         body.append([model.replace("+delta", " + Δ"), *cells])
     title = f"{output} [{unit}], {WINDOWS.get(window, window)}"
     return f"<h3>{_e(title)}</h3>" + _table(header, body)

@@ -1,6 +1,6 @@
-"""The command-line reference, generated from the click commands of :mod:`bayescal.cli`.
+"""The command-line reference, generated from the click commands of :mod:`bayescal.cli.main`.
 
-``python -m bayescal.cli_reference > docs/cli.md`` writes it; a test checks
+``python -m bayescal.cli.reference > docs/cli.md`` writes it; a test checks
 that the committed file equals the generated text, so the reference cannot
 drift from the code.
 """
@@ -12,7 +12,7 @@ from pathlib import Path
 
 import click
 
-from bayescal.cli import main
+from bayescal.cli.main import main
 
 _TYPE_NAMES = {
     "text": "text",
@@ -152,7 +152,7 @@ def cli_reference_markdown(group: click.Group = main, name: str = "bayescal") ->
     head = [
         "# Command-line reference",
         "",
-        "Generated from `bayescal.cli` by `python -m bayescal.cli_reference`; do not edit.",
+        "Generated from `bayescal.cli` by `python -m bayescal.cli.reference`; do not edit.",
         "Every command takes `-h` / `--help`. An error the user can cause (a study file",
         "that does not validate, missing data, a failed simulator) is printed as one line",
         "`error: ...` with exit status 2; `bayescal --debug COMMAND` shows the traceback.",

@@ -62,66 +62,13 @@ def validate(study: Path) -> None:
 
     STUDY is study.toml or the folder holding it.
     """
+    from bayescal.cli.progress import study_summary
     from bayescal.config import load_study
     from bayescal.data import load_measured
 
     config = load_study(study)
     measured = load_measured(config)
-    click.echo(summary(config, measured))
-
-
-def summary(study: Any, measured: Any) -> str:
-    """A short plain-text summary of a validated study and its data."""
-    from bayescal.data.align import format_duration
-
-    lines = [f"study {study.study.name!r} ({study.path})", _simulator_line(study.simulator)]
-    lines.append(f"parameters ({len(study.parameters)}):")
-    for name, p in study.parameters.items():
-        prior = p.prior
-        shape = f", a={prior.a:g}, b={prior.b:g}" if prior.distribution == "beta" else ""
-        lines.append(
-            f"  {name} [{p.unit}]: nominal {p.nominal:g}, {prior.distribution}"
-            f"({prior.lower:g}, {prior.upper:g}{shape}) -> {', '.join(p.targets)}"
-        )
-    step = study.data.step
-    lay = measured.layout
-    dropped = int(lay.dropped_starts.size)
-    first = min([*lay.train_starts.tolist(), *lay.dropped_starts.tolist()])
-    lines += [
-        f"data: {study.data.file} ({study.data.format})",
-        f"  boundary conditions: {', '.join(study.boundary_conditions) or 'none'}",
-        f"  calibrated outputs: {', '.join(study.outputs.calibrate)}",
-        f"clock: step {format_duration(step)}, {measured.times[0]} to {measured.times[-1]} UTC, "
-        f"{measured.n} samples ({format_duration(measured.n * step)})",
-        f"periods: warm-up {first} samples, {lay.m_star} training periods of {lay.period} "
-        "samples"
-        + (f" ({dropped} more dropped: missing outputs)" if dropped else "")
-        + f", test window {lay.test} samples",
-    ]
-    gaps = measured.gaps
-    if not gaps:
-        lines.append("gaps: none")
-    else:
-        filled = sum(g.interpolated for g in gaps)
-        lines.append(
-            f"gaps: {len(gaps)} ({filled} interpolated, {len(gaps) - filled} left missing)"
-        )
-        lines += [f"  {g.describe()}" for g in gaps[:20]]
-        if len(gaps) > 20:
-            lines.append(f"  ... and {len(gaps) - 20} more")
-    return "\n".join(lines)
-
-
-def _simulator_line(sim: Any) -> str:
-    if sim.type == "wall":
-        layers = ", ".join(f"{layer.name} {layer.thickness * 1000:g} mm" for layer in sim.layers)
-        return (
-            f"simulator: wall, {sim.boundary} boundaries, layers outside to inside: {layers}; "
-            f"outputs {', '.join(sim.outputs)}"
-        )
-    if sim.type == "box":
-        return f"simulator: box, {sim.mode}, outputs {', '.join(sim.output_names())}"
-    return f"simulator: {sim.type}"
+    click.echo(study_summary(config, measured))
 
 
 def _parse_assignments(values: tuple[str, ...]) -> dict[str, float]:
@@ -165,6 +112,7 @@ def simulate(study: Path, assignments: tuple[str, ...], out: Path | None) -> Non
     Prints fit metrics on the training and test windows and writes the series
     (CSV) and a measured-vs-simulated figure (PNG).
     """
+    from bayescal.cli.progress import metrics_text
     from bayescal.config import load_study
     from bayescal.errors import ConfigError
     from bayescal.simulate import check_simulation, write_simulation
@@ -180,25 +128,8 @@ def simulate(study: Path, assignments: tuple[str, ...], out: Path | None) -> Non
     except OSError as exc:  # a read-only folder, a full disk, a file in the way
         raise ConfigError(f"cannot write into {folder}: {exc.strerror or exc}") from None
     click.echo(f"simulated {config.study.name!r} at {values}")
-    click.echo(metrics_table(check.train, check.test))
+    click.echo(metrics_text(check.train, check.test))
     click.echo(f"wrote {files['csv']}\nwrote {files['png']}")
-
-
-def metrics_table(train: dict[str, Any], test: dict[str, Any]) -> str:
-    """Plain-text table of fit metrics per output and window."""
-    head = (
-        f"{'output':<16}{'window':<8}{'n':>6}{'MSE':>11}{'RMSE':>10}{'mean|e|':>10}"
-        f"{'max|e|':>10}{'bias':>10}{'CV(RMSE)%':>11}{'NMBE%':>8}"
-    )
-    rows = [head]
-    for window, metrics in (("train", train), ("test", test)):
-        for name, m in metrics.items():
-            rows.append(
-                f"{name:<16}{window:<8}{m.n:>6}{m.mse:>11.4g}{m.rmse:>10.4g}"
-                f"{m.mean_abs_error:>10.4g}{m.max_abs_error:>10.4g}{m.bias:>10.3g}"
-                f"{m.cv_rmse:>11.3g}{m.nmbe:>8.3g}"
-            )
-    return "\n".join(rows)
 
 
 @main.command()
@@ -220,47 +151,9 @@ def init(example: str | None, directory: Path | None, force: bool) -> None:
         click.echo("examples: " + ", ".join(names))
         return
     target = directory if directory is not None else Path(example)
-    copy_example(example, target, force=force)
+    examples.copy_example(example, target, force=force)
     click.echo(f"created {target}/study.toml from example {example!r}")
     click.echo(f"next: bayescal validate {target}   or   bayescal simulate {target}")
-
-
-def copy_example(example: str, target: Path, *, force: bool = False) -> Path:
-    """Copy a shipped example study folder to ``target``."""
-    import shutil
-
-    from bayescal import examples
-    from bayescal.errors import ConfigError
-
-    names = examples.available()
-    if example not in names:
-        raise ConfigError(f"no example {example!r}", hint=f"choose one of {', '.join(names)}")
-    if target.exists() and any(target.iterdir()) and not force:
-        raise ConfigError(
-            f"{target} exists and is not empty", hint="choose a new folder or pass --force"
-        )
-    shutil.copytree(
-        examples.path(example),
-        target,
-        dirs_exist_ok=True,
-        ignore=shutil.ignore_patterns("out", "__pycache__"),
-    )
-    return target
-
-
-def _mcmc_bar(quiet: bool) -> Any:
-    """Factory of tqdm bars for MCMC progress: ``(label, total) -> (tick, close)``."""
-    from tqdm.auto import tqdm
-
-    def factory(label: str, total: int) -> tuple[Callable[[int], None], Callable[[], None]]:
-        bar = tqdm(total=total, desc=label, unit="it", disable=quiet, mininterval=0.5)
-
-        def tick(done: int) -> None:
-            bar.update(max(0, min(done, total) - bar.n))
-
-        return tick, bar.close
-
-    return factory
 
 
 @main.command()
@@ -308,19 +201,13 @@ def run(
     again reuses stages whose inputs did not change and resumes interrupted
     simulations. A log is kept in OUTPUT_DIR/bayescal.log.
     """
+    from bayescal.cli.progress import describe, progress_options
     from bayescal.config import load_study
-    from bayescal.pipeline import Options, describe
+    from bayescal.pipeline import Options
     from bayescal.pipeline import run as run_pipeline
-    from bayescal.runner import tqdm_progress
 
     config = load_study(study)
-    options = Options(
-        backend=backend,
-        jobs=jobs,
-        scheduler=scheduler,
-        progress=None if quiet else tqdm_progress,
-        mcmc_progress=_mcmc_bar(quiet),
-    )
+    options = Options(backend=backend, jobs=jobs, scheduler=scheduler, **progress_options(quiet))
     res = run_pipeline(
         config,
         from_stage=from_stage,
@@ -338,9 +225,10 @@ def run(
 @STUDY
 @user_errors
 def show(study: Path) -> None:
-    """Summarise a finished calibration: posterior, diagnostics, metrics."""
+    """Summarise a calibration: posterior, diagnostics, metrics (what has run so far)."""
+    from bayescal.cli.progress import describe
     from bayescal.config import load_study
-    from bayescal.pipeline import describe, load_results
+    from bayescal.pipeline import load_results
 
     click.echo(describe(load_results(load_study(study))))
 

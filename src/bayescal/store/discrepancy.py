@@ -1,12 +1,14 @@
-"""The difference process as one netCDF file, written atomically.
+"""The difference process: ``discrepancy.nc``, written atomically.
 
 One ``xarray.Dataset`` (HDF5 through ``h5netcdf``, as the other artefacts)
 holds the estimate ``delta`` (physical units), the standardisation, the GP of
 ``Delta`` with its factorised covariances (so that a loaded discrepancy
 predicts bit for bit what the saved one did), the theta* draws of the phase
 (normalised, with ``lambda``, ``lambda*``, log density and acceptance) and, in
-the attributes, names, priors, seeds and settings. The write goes through
-:func:`bayescal.atomic.atomic_write_path` (temporary file, fsync, rename).
+the attributes, names, priors, seeds and settings. Variables carry
+``description`` attributes, and ``units`` where they have one unit. The write
+goes through :func:`bayescal.atomic.atomic_write_path` (temporary file, fsync,
+rename).
 """
 
 from __future__ import annotations
@@ -14,21 +16,36 @@ from __future__ import annotations
 import json
 import os
 from pathlib import Path
-from typing import Any
+from typing import Any, Final
 
 import numpy as np
 import xarray as xr
 
-from bayescal.artefacts import ENGINE, _check_format, _outputs, _read
-from bayescal.atomic import atomic_write_path
 from bayescal.calibration.posterior import Posterior
 from bayescal.design import prior_from_spec
 from bayescal.discrepancy.delta_gp import DeltaGP
 from bayescal.discrepancy.model import Discrepancy
+from bayescal.store.netcdf import (
+    DIMENSIONLESS,
+    check_format,
+    describe_variables,
+    output_unit,
+    read_dataset,
+    read_output_stack,
+    write_dataset,
+)
 
-__all__ = ["DISCREPANCY_FORMAT", "load_discrepancy", "save_discrepancy"]
+__all__ = [
+    "DISCREPANCY_FORMAT",
+    "FILE",
+    "discrepancy_dataset",
+    "load_discrepancy",
+    "save_discrepancy",
+]
 
-DISCREPANCY_FORMAT = "bayescal-discrepancy/1"
+DISCREPANCY_FORMAT: Final = "bayescal-discrepancy/1"
+#: File name in a study's output folder.
+FILE: Final = "discrepancy.nc"
 
 _GP_DIMS: dict[str, tuple[str, ...]] = {
     "basis": ("sample", "component"),
@@ -76,7 +93,29 @@ def discrepancy_dataset(d: Discrepancy, config_hash: str = "") -> xr.Dataset:
         "trend": d.gp.trend,
         "config_hash": config_hash,
     }
-    return xr.Dataset({k: xr.Variable(*v) for k, v in variables.items()}, attrs=attrs)
+    ds = xr.Dataset({k: xr.Variable(*v) for k, v in variables.items()}, attrs=attrs)
+    return describe_variables(ds, _attributes(d))
+
+
+def _attributes(d: Discrepancy) -> dict[str, tuple[str, str]]:
+    units = {output_unit(n) for n in d.outputs.names}
+    unit = units.pop() if len(units) == 1 else ""
+    stacked = "per output in its unit (output_names, output_sizes)"
+    return {
+        "delta": (
+            unit,
+            "estimate of Delta = observation - model per sample and training period, " + stacked,
+        ),
+        "x": (DIMENSIONLESS, "variable inputs of the training periods, normalised"),
+        "std_mean": (unit, "point-wise mean of the simulations, " + stacked),
+        "std_sd": (unit, "point-wise standard deviation of the simulations, " + stacked),
+        "unit_draws": (DIMENSIONLESS, "theta* of the discrepancy phase, normalised to [0, 1]"),
+        "lam": (DIMENSIONLESS, "precision lambda of the simulations outside the basis"),
+        "lam_star": (DIMENSIONLESS, "precision lambda* of the measurement error"),
+        "log_density": ("", "log posterior density (up to a constant) at the draw"),
+        "acceptance": (DIMENSIONLESS, "acceptance rate per chain and sampled coordinate"),
+        **{f"gp_{name}": ("", f"GP of Delta: {name}") for name in _GP_DIMS},
+    }
 
 
 def save_discrepancy(
@@ -98,12 +137,7 @@ def save_discrepancy(
     pathlib.Path
         The final path.
     """
-    ds = discrepancy_dataset(discrepancy, config_hash)
-
-    def write(temp: Path) -> None:
-        ds.to_netcdf(os.fspath(temp), engine=ENGINE)
-
-    return atomic_write_path(path, write)
+    return write_dataset(discrepancy_dataset(discrepancy, config_hash), path)
 
 
 def load_discrepancy(path: str | os.PathLike[str]) -> Discrepancy:
@@ -114,8 +148,8 @@ def load_discrepancy(path: str | os.PathLike[str]) -> Discrepancy:
     bayescal.errors.DataError
         If the file is missing or is not a discrepancy artefact.
     """
-    ds = _read(path)
-    _check_format(ds, DISCREPANCY_FORMAT, path)
+    ds = read_dataset(path)
+    check_format(ds, DISCREPANCY_FORMAT, path)
     v = {name: np.asarray(ds[name].values) for name in ds.data_vars}
     priors = {n: prior_from_spec(**spec) for n, spec in json.loads(ds.attrs["priors"]).items()}
     post = Posterior.build(
@@ -133,7 +167,7 @@ def load_discrepancy(path: str | os.PathLike[str]) -> Discrepancy:
         trend=str(ds.attrs["trend"]), x=v["x"], **{name: v[f"gp_{name}"] for name in _GP_DIMS}
     )
     return Discrepancy(
-        outputs=_outputs(ds),
+        outputs=read_output_stack(ds),
         x=v["x"],
         delta=v["delta"],
         gp=gp,

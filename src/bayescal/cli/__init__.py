@@ -1,0 +1,10 @@
+"""The command line: ``bayescal COMMAND`` (also ``python -m bayescal COMMAND``).
+
+* :mod:`bayescal.cli.main` -- the click commands (``main`` is the group);
+* :mod:`bayescal.cli.progress` -- all terminal text: summaries, tables, progress bars;
+* :mod:`bayescal.cli.reference` -- the generated command-line reference (``docs/cli.md``).
+"""
+
+from bayescal.cli.main import main
+
+__all__ = ["main"]

@@ -1,0 +1,159 @@
+"""All terminal text of the command line: summaries, tables and progress bars.
+
+* :func:`study_summary` -- what ``bayescal validate`` prints;
+* :func:`metrics_text` -- the metrics table of ``bayescal simulate``;
+* :func:`describe` -- what ``bayescal run`` and ``bayescal show`` print;
+* :func:`progress_options` -- the progress bars of the simulations and the
+  MCMC stages (tqdm), as :class:`bayescal.pipeline.Options` takes them.
+
+The metric columns of every table come from :func:`bayescal.metrics.metric_columns`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from typing import TYPE_CHECKING, Any
+
+from bayescal.metrics import KEY_COLUMNS, Metrics, metric_columns
+
+if TYPE_CHECKING:
+    from bayescal.pipeline import Results
+
+__all__ = ["describe", "mcmc_bar", "metrics_text", "progress_options", "study_summary"]
+
+Tick = Callable[[int], None]
+
+
+def study_summary(study: Any, measured: Any) -> str:
+    """A short plain-text summary of a validated study and its data."""
+    from bayescal.data.align import format_duration
+
+    lines = [f"study {study.study.name!r} ({study.path})", _simulator_line(study.simulator)]
+    lines.append(f"parameters ({len(study.parameters)}):")
+    for name, p in study.parameters.items():
+        prior = p.prior
+        shape = f", a={prior.a:g}, b={prior.b:g}" if prior.distribution == "beta" else ""
+        lines.append(
+            f"  {name} [{p.unit}]: nominal {p.nominal:g}, {prior.distribution}"
+            f"({prior.lower:g}, {prior.upper:g}{shape}) -> {', '.join(p.targets)}"
+        )
+    step = study.data.step
+    lay = measured.layout
+    dropped = int(lay.dropped_starts.size)
+    first = min([*lay.train_starts.tolist(), *lay.dropped_starts.tolist()])
+    lines += [
+        f"data: {study.data.file} ({study.data.format})",
+        f"  boundary conditions: {', '.join(study.boundary_conditions) or 'none'}",
+        f"  calibrated outputs: {', '.join(study.outputs.calibrate)}",
+        f"clock: step {format_duration(step)}, {measured.times[0]} to {measured.times[-1]} UTC, "
+        f"{measured.n} samples ({format_duration(measured.n * step)})",
+        f"periods: warm-up {first} samples, {lay.m_star} training periods of {lay.period} "
+        "samples"
+        + (f" ({dropped} more dropped: missing outputs)" if dropped else "")
+        + f", test window {lay.test} samples",
+    ]
+    gaps = measured.gaps
+    if not gaps:
+        lines.append("gaps: none")
+    else:
+        filled = sum(g.interpolated for g in gaps)
+        lines.append(
+            f"gaps: {len(gaps)} ({filled} interpolated, {len(gaps) - filled} left missing)"
+        )
+        lines += [f"  {g.describe()}" for g in gaps[:20]]
+        if len(gaps) > 20:
+            lines.append(f"  ... and {len(gaps) - 20} more")
+    return "\n".join(lines)
+
+
+def _simulator_line(sim: Any) -> str:
+    if sim.type == "wall":
+        layers = ", ".join(f"{layer.name} {layer.thickness * 1000:g} mm" for layer in sim.layers)
+        return (
+            f"simulator: wall, {sim.boundary} boundaries, layers outside to inside: {layers}; "
+            f"outputs {', '.join(sim.outputs)}"
+        )
+    if sim.type == "box":
+        return f"simulator: box, {sim.mode}, outputs {', '.join(sim.output_names())}"
+    return f"simulator: {sim.type}"
+
+
+def metrics_text(train: Mapping[str, Metrics], test: Mapping[str, Metrics]) -> str:
+    """Plain-text table of fit metrics per output and window (``bayescal simulate``)."""
+    columns = metric_columns("simulate")
+    head = f"{'output':<16}{'window':<8}" + "".join(f"{c.label:>{c.width}}" for c in columns)
+    rows = [head]
+    for window, metrics in (("train", train), ("test", test)):
+        for name, m in metrics.items():
+            values = m.as_dict()
+            cells = "".join(
+                f"{values[c.name]:>{c.width}}"
+                if c.kind == "count"
+                else f"{values[c.name]:>{c.width}.{c.digits}g}"
+                for c in columns
+            )
+            rows.append(f"{name:<16}{window:<8}{cells}")
+    return "\n".join(rows)
+
+
+def describe(res: Results) -> str:
+    """A terminal summary: posterior table, diagnostics, metrics, and what is not there yet."""
+    lines = [f"study {res.context.study.study.name!r} -> {res.context.out}"]
+    if res.posterior is not None:
+        table = res.posterior.summary()
+        lines += ["", "posterior (physical units):", table.to_string(float_format="{:.5g}".format)]
+        if res.posterior.warnings:
+            lines += ["", "diagnostics: NOT all passed"]
+            lines += [f"  warning: {w}" for w in res.posterior.warnings]
+        else:
+            lines += ["", "diagnostics: all passed (R-hat <= 1.01, bulk and tail ESS >= 400)"]
+    if res.emulator is not None:
+        for name, rmse in res.emulator.loo.rmse.items():
+            lines.append(
+                f"emulator leave-one-run-out RMSE of {name}: {rmse:.4g} "
+                f"(output SD {res.emulator.loo.output_sd[name]:.4g})"
+            )
+    if res.predictions is not None:
+        m = res.predictions.metrics
+        cols = [*KEY_COLUMNS, *(c.name for c in metric_columns("show"))]
+        lines += [
+            "",
+            "metrics (max_abs_error is the paper's 'MAE'; CV(RMSE), NMBE in %; guideline14: "
+            "CV(RMSE) <= 30 % and |NMBE| <= 10 %, ASHRAE Guideline 14 hourly):",
+        ]
+        cols = [c for c in cols if c in m.columns]  # older runs lack newer columns
+        lines.append(m[cols].to_string(index=False, float_format="{:.4g}".format))
+    if res.simulations is not None and res.simulations.failures:
+        lines += ["", f"{len(res.simulations.failures)} failed run(s):"]
+        lines += [f"  run {f.index}: {f.error_type}: {f.message}" for f in res.simulations.failures]
+    missing = res.missing()
+    if missing:
+        lines += [
+            "",
+            f"not run yet: {', '.join(missing)} "
+            f"(`bayescal run {res.context.study.path}` runs them)",
+        ]
+    return "\n".join(lines)
+
+
+def mcmc_bar(quiet: bool) -> Callable[[str, int], tuple[Tick, Callable[[], None]]]:
+    """Factory of tqdm bars for MCMC progress: ``(label, total) -> (tick, close)``."""
+    from tqdm.auto import tqdm
+
+    def factory(label: str, total: int) -> tuple[Tick, Callable[[], None]]:
+        bar = tqdm(total=total, desc=label, unit="it", disable=quiet, mininterval=0.5)
+
+        def tick(done: int) -> None:
+            bar.update(max(0, min(done, total) - bar.n))
+
+        return tick, bar.close
+
+    return factory
+
+
+def progress_options(quiet: bool) -> dict[str, Any]:
+    """The progress callbacks of :class:`bayescal.pipeline.Options`: a bar for the
+    simulations (none when ``quiet``) and one per MCMC stage (disabled when ``quiet``)."""
+    from bayescal.runner import tqdm_progress
+
+    return {"progress": None if quiet else tqdm_progress, "mcmc_progress": mcmc_bar(quiet)}

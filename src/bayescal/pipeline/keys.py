@@ -1,0 +1,88 @@
+"""Stage keys and seeds: what a stage's result depends on, as a hash.
+
+Every stage has a *key*: the SHA-256 of everything its result depends on (the
+settings it reads and the keys of the stages before it). The runner
+(:mod:`bayescal.pipeline.run`) reuses a stage whose recorded key
+(:class:`bayescal.store.stages.StageLog`) equals the key it computes now.
+The keys cover settings and inputs, not bayescal's own code. An output folder
+written by an earlier bayescal is reused as long as these functions give the
+same keys (``tests/test_stage_keys.py`` pins them for the wall example).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from bayescal.runner import forcing_fingerprint, simulator_fingerprint
+
+if TYPE_CHECKING:
+    from bayescal.pipeline.stages import Context
+
+__all__ = ["derived_seed", "digest", "stage_keys"]
+
+
+def _plain(obj: Any) -> Any:
+    if isinstance(obj, dict):
+        return {str(k): _plain(v) for k, v in sorted(obj.items(), key=lambda kv: str(kv[0]))}
+    if isinstance(obj, list | tuple):
+        return [_plain(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return hashlib.sha256(np.ascontiguousarray(obj).tobytes()).hexdigest() + str(obj.shape)
+    if isinstance(obj, float | int | str | bool) or obj is None:
+        return obj
+    if isinstance(obj, Path):
+        return str(obj)
+    return repr(obj)
+
+
+def digest(*parts: Any) -> str:
+    """SHA-256 (hex) of the canonical JSON of ``parts`` (arrays by content)."""
+    text = json.dumps(_plain(list(parts)), sort_keys=True, separators=(",", ":"))
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+def derived_seed(master: int, stage: str) -> int:
+    """A seed for ``stage`` derived from the study's master seed."""
+    entropy = [int(master), *stage.encode()]
+    return int(np.random.SeedSequence(entropy).generate_state(1)[0])
+
+
+def _measured_key(ctx: Context) -> str:
+    m = ctx.measured
+    layout = dataclasses.asdict(m.layout)
+    return digest(forcing_fingerprint(m.forcing), dict(m.outputs), layout, m.times)
+
+
+def stage_keys(ctx: Context) -> dict[str, str]:
+    """The key of every stage for the study as it is now."""
+    s = ctx.study
+    dump = s.model_dump(mode="json")
+    keys: dict[str, str] = {}
+    keys["design"] = digest("design", dump["parameters"], dump["design"], s.study.seed)
+    keys["simulate"] = digest(
+        "simulate",
+        keys["design"],
+        simulator_fingerprint(ctx.simulator),
+        forcing_fingerprint(ctx.measured.forcing),
+        dump["runner"]["retries"],
+        dump["runner"]["timeout"],
+    )
+    keys["emulator"] = digest(
+        "emulator", keys["simulate"], _measured_key(ctx), dump["outputs"], dump["emulator"]
+    )
+    keys["calibrate"] = digest("calibrate", keys["emulator"], dump["calibration"])
+    keys["discrepancy"] = digest("discrepancy", keys["calibrate"], dump["discrepancy"])
+    keys["predict"] = digest(
+        "predict",
+        keys["discrepancy"],
+        dump["predict"],
+        {n: p.nominal for n, p in s.parameters.items()},
+    )
+    keys["report"] = digest("report", keys["predict"], s.study.name, s.study.description)
+    return keys

@@ -1,0 +1,425 @@
+"""The stage runner: study file -> design -> ... -> report, resumable.
+
+:func:`run` executes the stages of :mod:`bayescal.pipeline.stages` in order,
+writing each stage's artefacts into the study's output folder through
+:mod:`bayescal.store` and recording the stage in ``stages.json``
+(:class:`bayescal.store.stages.StageLog`). Running again reuses every stage
+whose key (:mod:`bayescal.pipeline.keys`) is unchanged and whose files exist,
+and says how long it took when it ran; ``from_stage`` forces that stage and
+all later ones. The simulation runner additionally caches every finished run,
+so a killed ``simulate`` stage resumes where it stopped.
+
+:func:`load_results` reads back what a study's output folder holds, after
+whichever stage it stopped.
+"""
+
+from __future__ import annotations
+
+import logging
+import shutil
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from bayescal.calibration.posterior import Posterior
+from bayescal.config import Study
+from bayescal.design import Design
+from bayescal.discrepancy import Discrepancy
+from bayescal.errors import ConfigError
+from bayescal.pipeline.keys import stage_keys
+from bayescal.pipeline.stages import (
+    Context,
+    EmulatorResult,
+    Options,
+    Predictions,
+    assemble_runs,
+    build_emulator,
+    calibrate_stage,
+    discrepancy_stage,
+    make_design,
+    nominal_run,
+    predict_stage,
+    prepare,
+    simulate,
+)
+from bayescal.runner import RunResults
+from bayescal.store import design as design_store
+from bayescal.store import discrepancy as discrepancy_store
+from bayescal.store import emulator as emulator_store
+from bayescal.store import posterior as posterior_store
+from bayescal.store import predictions as predictions_store
+from bayescal.store import runs as runs_store
+from bayescal.store.stages import STAGES, StageLog
+
+__all__ = ["Results", "file_logger", "load_results", "run", "write_study_report"]
+
+Say = Callable[[str], None]
+#: The report page, relative to the output folder.
+REPORT_FILE = Path("report") / "report.html"
+LOG_FILE = "bayescal.log"
+
+
+@dataclass
+class Results:
+    """What a run produced, or what an output folder holds (stages not reached are ``None``)."""
+
+    context: Context
+    design: Design | None = None
+    simulations: RunResults | None = None
+    emulator: EmulatorResult | None = None
+    posterior: Posterior | None = None
+    discrepancy: Discrepancy | None = None
+    predictions: Predictions | None = None
+    report: Path | None = None
+    reused: tuple[str, ...] = ()
+    ran: tuple[str, ...] = ()
+
+    def missing(self) -> tuple[str, ...]:
+        """The stages whose result is not here, in stage order (``discrepancy`` only
+        where the study enables it)."""
+        have = {
+            "design": self.design,
+            "simulate": self.simulations,
+            "emulator": self.emulator,
+            "calibrate": self.posterior,
+            "discrepancy": self.discrepancy,
+            "predict": self.predictions,
+            "report": self.report,
+        }
+        if not self.context.study.discrepancy.enabled:
+            have.pop("discrepancy")
+        return tuple(stage for stage, value in have.items() if value is None)
+
+
+def file_logger(folder: Path) -> logging.Logger:
+    """The ``bayescal`` logger, writing to ``folder/bayescal.log`` (appending)."""
+    logger = logging.getLogger("bayescal.run")
+    logger.setLevel(logging.INFO)
+    logger.propagate = False
+    target = str((folder / LOG_FILE).resolve())
+    for handler in list(logger.handlers):
+        if getattr(handler, "baseFilename", None) != target:
+            logger.removeHandler(handler)
+            handler.close()
+    if not logger.handlers:
+        handler = logging.FileHandler(target, encoding="utf-8")
+        handler.setFormatter(logging.Formatter("%(asctime)s %(levelname)s %(message)s"))
+        logger.addHandler(handler)
+    return logger
+
+
+class _Runner:
+    """Runs or reuses each stage and records it."""
+
+    def __init__(self, ctx: Context, force_from: str | None, say: Say) -> None:
+        self.ctx = ctx
+        self.out = ctx.out
+        self.out.mkdir(parents=True, exist_ok=True)
+        self.log = StageLog.open(self.out)
+        self.logger = file_logger(self.out)
+        self.keys = stage_keys(ctx)
+        self.say = say
+        self.reused: list[str] = []
+        self.ran: list[str] = []
+        self.stale = False
+        if force_from is not None:
+            self.log.forget_from(force_from)
+
+    def reuse(self, stage: str) -> bool:
+        """Whether ``stage`` can be read back (and nothing before it was redone)."""
+        ok = not self.stale and self.log.done(stage, self.keys[stage])
+        if ok:
+            self.reused.append(stage)
+            self._note(f"{stage}: up to date, reused{self._when(stage)}")
+        else:
+            self.stale = True
+            self._note(f"{stage}: running")
+        return ok
+
+    def _when(self, stage: str) -> str:
+        """`` (ran 38.2 s on 2026-11-25 10:31)`` from the record, ``""`` if it does not say."""
+        last = self.log.last_run(stage)
+        if last is None:
+            return ""
+        on = "" if last.finished is None else f" on {last.finished:%Y-%m-%d %H:%M}"
+        return f" (ran {last.seconds:.1f} s{on})"
+
+    def checkpoints(self, stage: str) -> Path:
+        """Folder of the MCMC snapshots of ``stage`` (its key in the name)."""
+        return self.out / "checkpoints" / f"{stage}-{self.keys[stage][:16]}"
+
+    def finish(self, stage: str, files: list[str], start: float) -> None:
+        seconds = time.perf_counter() - start
+        self.log.finish(stage, self.keys[stage], files, seconds)
+        shutil.rmtree(self.checkpoints(stage), ignore_errors=True)
+        self.ran.append(stage)
+        self._note(f"{stage}: done in {seconds:.1f} s")
+
+    def _note(self, text: str) -> None:
+        self.logger.info(text)
+        self.say(text)
+
+
+def _design(r: _Runner) -> Design:
+    path = r.out / design_store.FILE
+    if r.reuse("design"):
+        return design_store.load_design(path)
+    start = time.perf_counter()
+    design = make_design(r.ctx)
+    design_store.save_design(design, path)
+    r.finish("design", [design_store.FILE], start)
+    return design
+
+
+def _simulations(r: _Runner, design: Design) -> RunResults:
+    if r.reuse("simulate"):
+        return runs_store.load_simulations(r.out, design)
+    start = time.perf_counter()
+    sims = simulate(r.ctx, design)
+    for f in sims.failures:
+        r.logger.warning("run %d failed (%s): %s", f.index, f.error_type, f.message)
+    if sims.failures:
+        r.say(f"simulate: {len(sims.failures)} of {design.runs} runs failed and are dropped")
+    files = runs_store.save_simulations(r.out, sims)
+    r.finish("simulate", files, start)
+    return sims
+
+
+def _parameter_units(ctx: Context) -> list[str]:
+    return [prior.unit for prior in ctx.priors.values()]
+
+
+def _load_emulator(ctx: Context, sims: RunResults) -> EmulatorResult:
+    return EmulatorResult(
+        assemble_runs(ctx, sims),
+        emulator_store.load_emulator(ctx.out / emulator_store.FILE),
+        emulator_store.load_emulator_cv(ctx.out / emulator_store.CV_FILE),
+    )
+
+
+def _emulator(r: _Runner, sims: RunResults) -> EmulatorResult:
+    if r.reuse("emulator"):
+        return _load_emulator(r.ctx, sims)
+    start = time.perf_counter()
+    em = build_emulator(r.ctx, sims, r.checkpoints("emulator"))
+    emulator_store.save_emulator(
+        em.emulator,
+        r.out / emulator_store.FILE,
+        r.ctx.study.config_hash(),
+        parameter_units=_parameter_units(r.ctx),
+    )
+    emulator_store.save_emulator_cv(em.loo, r.out / emulator_store.CV_FILE)
+    for name, rmse in em.loo.rmse.items():
+        r.say(
+            f"emulator: leave-one-run-out RMSE of {name} {rmse:.4g} "
+            f"(output SD {em.loo.output_sd[name]:.4g}); {em.emulator.basis.p} basis vectors"
+        )
+    r.finish("emulator", [emulator_store.FILE, emulator_store.CV_FILE], start)
+    return em
+
+
+def _calibration(r: _Runner, em: EmulatorResult) -> Posterior:
+    if r.reuse("calibrate"):
+        return posterior_store.load_posterior(r.out / posterior_store.FILE)
+    start = time.perf_counter()
+    post = calibrate_stage(r.ctx, em, checkpoint_dir=r.checkpoints("calibrate"))
+    posterior_store.save_posterior(post, r.out / posterior_store.FILE, r.ctx.study.config_hash())
+    posterior_store.save_posterior_summary(post, r.out / posterior_store.SUMMARY_FILE)
+    for w in post.warnings:
+        r.logger.warning("calibration: %s", w)
+        r.say(f"warning: {w}")
+    r.finish("calibrate", [posterior_store.FILE, posterior_store.SUMMARY_FILE], start)
+    return post
+
+
+def _discrepancy(r: _Runner, em: EmulatorResult, post: Posterior) -> Discrepancy | None:
+    if not r.ctx.study.discrepancy.enabled:
+        if not r.reuse("discrepancy"):
+            r.finish("discrepancy", [], time.perf_counter())
+        return None
+    path = r.out / discrepancy_store.FILE
+    if r.reuse("discrepancy"):
+        return discrepancy_store.load_discrepancy(path)
+    start = time.perf_counter()
+    disc = discrepancy_stage(r.ctx, em, post)
+    assert disc is not None  # enabled above
+    discrepancy_store.save_discrepancy(disc, path)
+    r.finish("discrepancy", [discrepancy_store.FILE], start)
+    return disc
+
+
+def _predictions(
+    r: _Runner, em: EmulatorResult, post: Posterior, disc: Discrepancy | None
+) -> Predictions:
+    if r.reuse("predict"):
+        return Predictions(*predictions_store.load_predictions(r.out))
+    start = time.perf_counter()
+    pred = predict_stage(r.ctx, em, post, disc, nominal_run(r.ctx))
+    files = predictions_store.save_predictions(r.out, pred.dataset, pred.metrics)
+    r.finish("predict", files, start)
+    return pred
+
+
+def _report(r: _Runner, res: Results) -> Path:
+    target = r.out / REPORT_FILE
+    if r.reuse("report"):
+        return target
+    start = time.perf_counter()
+    path = write_study_report(res)
+    r.finish("report", [str(path.relative_to(r.out))], start)
+    return path
+
+
+def write_study_report(res: Results) -> Path:
+    """Write the HTML report of a run's results into ``out/report/``.
+
+    Raises
+    ------
+    ConfigError
+        If the emulator, calibrate or predict stage has not run.
+    """
+    from bayescal.report.study import write_study_report as write
+
+    if res.emulator is None or res.posterior is None or res.predictions is None:
+        missing = [s for s in res.missing() if s in ("emulator", "calibrate", "predict")]
+        raise ConfigError(
+            "the report needs the emulator, calibrate and predict stages; "
+            f"not run yet: {', '.join(missing)}",
+            hint=f"run `bayescal run {res.context.study.path}` first",
+        )
+    sims = res.simulations
+    design = res.design if res.design is not None else sims.design if sims is not None else None
+    if design is None:  # pragma: no cover - the emulator stage needs the design
+        raise ConfigError("the report needs the design stage")
+    return write(
+        res.context.study,
+        res.context.measured.layout,
+        res.context.out / REPORT_FILE.parent,
+        design=design,
+        failures=sims.failures if sims is not None else (),
+        emulator=res.emulator.emulator,
+        loo=res.emulator.loo,
+        posterior=res.posterior,
+        discrepancy=res.discrepancy,
+        predictions=res.predictions.dataset,
+        metrics=res.predictions.metrics,
+    )
+
+
+def run(
+    study: Study,
+    *,
+    from_stage: str | None = None,
+    until: str = "report",
+    options: Options | None = None,
+    say: Say | None = None,
+) -> Results:
+    """Run (or resume) a study's calibration.
+
+    Parameters
+    ----------
+    study
+        A validated study (:func:`bayescal.config.load_study`).
+    from_stage
+        Force this stage and every later one to run again.
+    until
+        Last stage to run.
+    options
+        Backends, workers and progress callbacks (they do not change results).
+    say
+        Receives one-line progress notes (default: discarded); a reused stage
+        says how long it ran: ``calibrate: up to date, reused (ran 38.2 s on
+        2026-11-25 10:31)``.
+
+    Returns
+    -------
+    Results
+    """
+    for name, value in (("from_stage", from_stage), ("until", until)):
+        if value is not None and value not in STAGES:
+            raise ConfigError(f"{name} must be one of {', '.join(STAGES)}, got {value!r}")
+    ctx = prepare(study, options)
+    r = _Runner(ctx, from_stage, say or (lambda _: None))
+    r.logger.info("bayescal run of %s (config %s)", study.path, study.config_hash()[:12])
+    res = Results(ctx)
+    last = STAGES.index(until)
+    steps: list[tuple[str, Callable[[], None]]] = [
+        ("design", lambda: setattr(res, "design", _design(r))),
+        ("simulate", lambda: setattr(res, "simulations", _simulations(r, _need(res.design)))),
+        ("emulator", lambda: setattr(res, "emulator", _emulator(r, _need(res.simulations)))),
+        ("calibrate", lambda: setattr(res, "posterior", _calibration(r, _need(res.emulator)))),
+        (
+            "discrepancy",
+            lambda: setattr(
+                res, "discrepancy", _discrepancy(r, _need(res.emulator), _need(res.posterior))
+            ),
+        ),
+        (
+            "predict",
+            lambda: setattr(
+                res,
+                "predictions",
+                _predictions(r, _need(res.emulator), _need(res.posterior), res.discrepancy),
+            ),
+        ),
+        ("report", lambda: setattr(res, "report", _report(r, res))),
+    ]
+    for i, (_, step) in enumerate(steps):
+        if i > last:
+            break
+        step()
+    res.reused, res.ran = tuple(r.reused), tuple(r.ran)
+    return res
+
+
+def _need(value: Any) -> Any:
+    if value is None:  # pragma: no cover - the stages run in order
+        raise RuntimeError("a stage ran before the stage it depends on")
+    return value
+
+
+def load_results(study: Study) -> Results:
+    """Read back what a study's output folder holds, without running anything.
+
+    The study may have stopped after any stage: the results of the stages
+    recorded as finished in ``stages.json`` (with their files there) are read,
+    in stage order up to the first one that is not; the others are ``None``
+    (:meth:`Results.missing` lists them). A stage forced to run again
+    (``--from``) counts as not finished until it has.
+
+    Raises
+    ------
+    ConfigError
+        If not even the design stage has finished.
+    """
+    ctx = prepare(study)
+    out = ctx.out
+    log = StageLog.open(out)
+    res = Results(ctx)
+    if not log.finished("design"):
+        raise ConfigError(
+            f"{out} has no finished calibration (no stage has finished)",
+            hint=f"run `bayescal run {study.path}` first",
+        )
+    res.design = design_store.load_design(out / design_store.FILE)
+    if not log.finished("simulate"):
+        return res
+    res.simulations = runs_store.load_simulations(out, res.design)
+    if not log.finished("emulator"):
+        return res
+    res.emulator = _load_emulator(ctx, res.simulations)
+    if not log.finished("calibrate"):
+        return res
+    res.posterior = posterior_store.load_posterior(out / posterior_store.FILE)
+    if not log.finished("discrepancy"):
+        return res
+    if study.discrepancy.enabled and (out / discrepancy_store.FILE).is_file():
+        res.discrepancy = discrepancy_store.load_discrepancy(out / discrepancy_store.FILE)
+    if not log.finished("predict"):
+        return res
+    res.predictions = Predictions(*predictions_store.load_predictions(out))
+    if log.finished("report") and (out / REPORT_FILE).is_file():
+        res.report = out / REPORT_FILE
+    return res

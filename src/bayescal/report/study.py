@@ -1,0 +1,166 @@
+"""What the report of a study shows: its settings, warnings and the Delta correlations.
+
+:func:`write_study_report` takes a study's results as plain objects (no
+pipeline object: the pipeline calls it) and decides the report's content:
+the warnings at the top (failed diagnostics, failed simulator runs), the
+settings table, and the correlation of the discrepancy with each boundary
+condition; :func:`bayescal.report.html.write_report` writes the page.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import xarray as xr
+
+from bayescal.calibration.posterior import Posterior
+from bayescal.config import Study
+from bayescal.design import Design
+from bayescal.discrepancy import Discrepancy
+from bayescal.emulator.gp import Emulator, LooResult
+from bayescal.periods import PeriodLayout
+from bayescal.report.html import ReportInputs, write_report
+from bayescal.runner import RunFailure
+
+__all__ = ["delta_correlation", "report_settings", "write_study_report"]
+
+SAMPLER_NAMES = {"mwg": "Metropolis-within-Gibbs", "nuts": "NUTS"}
+
+
+def delta_correlation(predictions: xr.Dataset) -> pd.DataFrame:
+    """Pearson correlation of Delta with each boundary condition over the training samples.
+
+    Parameters
+    ----------
+    predictions
+        The predictions dataset with ``{output}_delta`` and ``bc_{name}`` series
+        (:func:`bayescal.pipeline.predict.predictions_dataset`).
+
+    Returns
+    -------
+    pandas.DataFrame
+        Rows: outputs; columns: boundary conditions; NaN where a series is constant. [-]
+    """
+    ds = predictions
+    train = ds["window"].values == "train"
+    outputs = ds.attrs["outputs"].split(",")
+    boundary = [b for b in ds.attrs["boundary"].split(",") if b]
+    table = {}
+    for o in outputs:
+        d = ds[f"{o}_delta"].values[train]
+        row = {}
+        for b in boundary:
+            v = ds[f"bc_{b}"].values[train]
+            ok = np.isfinite(d) & np.isfinite(v)
+            sd = np.std(d[ok]) * np.std(v[ok]) if ok.sum() > 2 else 0.0
+            row[b] = float(np.corrcoef(d[ok], v[ok])[0, 1]) if sd > 0 else float("nan")
+        table[o] = row
+    return pd.DataFrame(table).T
+
+
+def report_settings(
+    study: Study, layout: PeriodLayout, emulator: Emulator | None = None
+) -> dict[str, object]:
+    """The key settings of a study, as the report's settings table shows them.
+
+    Parameters
+    ----------
+    study
+        The validated study.
+    layout
+        The periods of its measured data.
+    emulator
+        The trained emulator (adds the number of basis vectors and the inputs).
+    """
+    s = study
+    out: dict[str, object] = {
+        "simulator": s.simulator.type,
+        "runs (design)": s.design.runs,
+        "training periods m*": layout.m_star,
+        "samples per period": layout.period,
+        "test samples": layout.test,
+        "emulator MCMC (burn + kept, 2 chains)": f"{s.emulator.burn} + {s.emulator.samples}",
+        "calibration MCMC": f"{SAMPLER_NAMES[s.calibration.sampler]}, "
+        f"{s.calibration.chains} chains x ({s.calibration.burn} + {s.calibration.samples})",
+        "algebra": s.emulator.algebra,
+        "discrepancy": s.discrepancy.enabled,
+        "seed": s.study.seed,
+    }
+    if s.discrepancy.enabled:
+        burn, kept = s.discrepancy_lengths()
+        out["discrepancy MCMC"] = (
+            f"Metropolis-within-Gibbs with Delta updates, {s.calibration.chains} chains x "
+            f"({burn} + {kept})"
+        )
+    if emulator is not None:
+        out["basis vectors p"] = emulator.basis.p
+        out["variable inputs x"] = ", ".join(emulator.inputs.labels)
+    return out
+
+
+def write_study_report(
+    study: Study,
+    layout: PeriodLayout,
+    folder: Path,
+    *,
+    design: Design,
+    failures: Sequence[RunFailure],
+    emulator: Emulator,
+    loo: LooResult,
+    posterior: Posterior,
+    discrepancy: Discrepancy | None,
+    predictions: xr.Dataset,
+    metrics: pd.DataFrame,
+) -> Path:
+    """Write the HTML report of a study's results into ``folder``.
+
+    Parameters
+    ----------
+    study
+        The validated study (name, description, settings).
+    layout
+        The periods of its measured data.
+    folder
+        Output folder of the report (``out/report``).
+    design
+        The full design (all rows, failed ones included).
+    failures
+        The simulator runs that failed (may be empty).
+    emulator, loo
+        The trained emulator and its leave-one-run-out cross-validation.
+    posterior
+        The calibration posterior.
+    discrepancy
+        The difference process, if it was estimated.
+    predictions, metrics
+        The predictions dataset and the metrics table.
+
+    Returns
+    -------
+    pathlib.Path
+        ``folder / "report.html"``.
+    """
+    warnings = list(posterior.warnings)
+    if failures:
+        warnings.append(f"{len(failures)} simulator run(s) failed and were dropped")
+    inputs = ReportInputs(
+        study_name=study.study.name,
+        description=study.study.description,
+        config_hash=study.config_hash(),
+        design=design,
+        failures=tuple(failures),
+        emulator=emulator,
+        loo=loo,
+        posterior=posterior,
+        discrepancy_posterior=None if discrepancy is None else discrepancy.posterior,
+        predictions=predictions,
+        metrics=metrics,
+        delta_correlation=None if discrepancy is None else delta_correlation(predictions),
+        delta_explained=None if discrepancy is None else dict(discrepancy.explained),
+        warnings=tuple(warnings),
+        settings=report_settings(study, layout, emulator),
+    )
+    return write_report(inputs, folder)

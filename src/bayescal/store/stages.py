@@ -1,0 +1,105 @@
+"""The stage record of a study's output folder: ``stages.json``.
+
+When a stage finishes, its key (:mod:`bayescal.pipeline.keys`), the files it
+wrote, how long it ran and when it finished are recorded in ``stages.json``
+(written atomically after the stage's own files). A later run reuses a stage
+when its recorded key equals the key it would compute now and all its files
+exist; otherwise it runs the stage again, and with it every stage after it.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Iterable
+from dataclasses import dataclass, field
+from datetime import datetime
+from pathlib import Path
+from typing import Any, Final
+
+from bayescal.atomic import atomic_write_json, read_json
+
+__all__ = ["RECORD", "STAGES", "StageLog", "StageRun"]
+
+#: Stages in order (``--from`` takes one of these).
+STAGES: Final = ("design", "simulate", "emulator", "calibrate", "discrepancy", "predict", "report")
+RECORD: Final = "stages.json"
+_FINISHED = "%Y-%m-%dT%H:%M:%S%z"
+
+
+@dataclass(frozen=True)
+class StageRun:
+    """How a recorded stage ran.
+
+    Attributes
+    ----------
+    seconds
+        Wall time of the stage. [s]
+    finished
+        When it finished (the local time of the machine, with its UTC offset),
+        ``None`` where the record does not say.
+    """
+
+    seconds: float
+    finished: datetime | None
+
+
+@dataclass
+class StageLog:
+    """The record of finished stages in ``folder/stages.json``."""
+
+    folder: Path
+    records: dict[str, dict[str, Any]] = field(default_factory=dict)
+
+    @classmethod
+    def open(cls, folder: Path) -> StageLog:
+        """Read the record (an unreadable record counts as empty: everything reruns)."""
+        path = folder / RECORD
+        records: dict[str, dict[str, Any]] = {}
+        if path.is_file():
+            try:
+                loaded = read_json(path)
+                records = loaded if isinstance(loaded, dict) else {}
+            except (OSError, ValueError):
+                records = {}
+        return cls(folder, records)
+
+    def done(self, stage: str, key: str) -> bool:
+        """Whether ``stage`` finished with ``key`` and its files are all there."""
+        rec = self.records.get(stage) or {}
+        return rec.get("key") == key and self.finished(stage)
+
+    def finished(self, stage: str) -> bool:
+        """Whether ``stage`` is recorded as finished (with any key) and its files are all there."""
+        rec = self.records.get(stage)
+        if not rec:
+            return False
+        return all((self.folder / f).exists() for f in rec.get("files", []))
+
+    def last_run(self, stage: str) -> StageRun | None:
+        """How ``stage`` ran when it was recorded; ``None`` if the record does not say."""
+        rec = self.records.get(stage) or {}
+        try:
+            seconds = float(rec["seconds"])
+        except (KeyError, TypeError, ValueError):
+            return None
+        try:
+            finished: datetime | None = datetime.strptime(str(rec["finished"]), _FINISHED)
+        except (KeyError, ValueError):
+            finished = None
+        return StageRun(seconds, finished)
+
+    def finish(self, stage: str, key: str, files: Iterable[str], seconds: float) -> None:
+        """Record ``stage`` as finished (after its files are written)."""
+        self.records[stage] = {
+            "key": key,
+            "files": sorted(files),
+            "seconds": round(float(seconds), 3),
+            "finished": time.strftime(_FINISHED),
+        }
+        atomic_write_json(self.folder / RECORD, self.records)
+
+    def forget_from(self, stage: str) -> None:
+        """Drop the records of ``stage`` and every later stage."""
+        later = STAGES[STAGES.index(stage) :]
+        self.records = {k: v for k, v in self.records.items() if k not in later}
+        atomic_write_json(self.folder / RECORD, self.records)
