@@ -1,7 +1,7 @@
 """Calibration stage on the virtual wall: log-density cost, MCMC speed and ESS per second.
 
 For the paper's size (R = 30 runs x m* = 25 daily periods) and for R = 200 x
-m* = 100, on the virtual wall of ``tests/virtual_wall.py`` (basis at 99 % of
+m* = 100, on the virtual wall of ``tests/helpers/virtual_wall.py`` (basis at 99 % of
 the variance), prints
 
 * the emulator training time (MwG over eq. 9, one chain) and its cost per sweep;

@@ -2,7 +2,7 @@
 
 The built-in :class:`~bayescal.simulators.wall.MultilayerWall` of the paper
 (glass-fibre board | aerated concrete | glass-fibre board, imposed surface
-temperatures, ``tests/virtual_wall.py``) over 1644 half-hourly samples, a
+temperatures, ``tests/helpers/virtual_wall.py``) over 1644 half-hourly samples, a
 Latin hypercube of 1000 parameter sets over the paper's priors, through
 :func:`bayescal.runner.run_design` with ``backend="dask"`` on a
 ``LocalCluster`` of 2 single-threaded worker processes (started once before

@@ -1,8 +1,8 @@
 """NUTS (JAX/BlackJAX) against Metropolis-within-Gibbs for theta* on the virtual wall.
 
-The calibration posterior (eq. 16) of the virtual wall of ``tests/virtual_wall.py``
+The calibration posterior (eq. 16) of the virtual wall of ``tests/helpers/virtual_wall.py``
 at the paper's size (R = 30 runs x m* = 25 daily periods, basis at 99 % of the
-variance, emulator trained as in tests/test_calibration.py). Per repeat, and
+variance, emulator trained as in tests/calibration/test_calibration.py). Per repeat, and
 interleaved so that both samplers see the same machine load:
 
 * MwG: :func:`bayescal.calibration.posterior.calibrate` at the default lengths

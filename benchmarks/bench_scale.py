@@ -4,7 +4,7 @@ Target of the issue: R = 500 runs x m* = 200 periods x p = 5 bases, emulator
 trained and theta* calibrated (4 chains, 5000 sweeps after burn-in) within 15
 minutes on 2 cores and under 4 GiB.
 
-Data: the virtual wall of ``tests/virtual_wall.py`` (the paper's wall driven by
+Data: the virtual wall of ``tests/helpers/virtual_wall.py`` (the paper's wall driven by
 synthetic surface temperatures, "measured" = truth + noise) with ``R`` Latin-
 hypercube runs over ``m*`` daily periods, and an output basis of exactly ``p``
 components (``assemble(..., components=p)``). Chains run in worker processes

@@ -1,7 +1,7 @@
 """Vectorised (lockstep) chains against serial and process chains (issue 7).
 
 Calibration of theta*, lambda and lambda* (eq. 16) on the virtual wall of
-``tests/virtual_wall.py`` (basis at 99 % of the variance, emulator trained as
+``tests/helpers/virtual_wall.py`` (basis at 99 % of the variance, emulator trained as
 in ``bench_calibration.py``), with the Metropolis-within-Gibbs settings of
 ``bayescal.calibration.posterior`` (batches of 25, adaptation cap 0.25), at the
 paper's size (R = 30 runs x m* = 25 periods) and a medium one (R = 200 x m* =

@@ -36,7 +36,7 @@ import io
 import json
 import os
 import tempfile
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterator, Mapping
 from pathlib import Path
 from typing import IO, Any
 
@@ -98,6 +98,17 @@ def _temporary(final: Path) -> tuple[int, str]:
     return fd, temp_name
 
 
+@contextlib.contextmanager
+def _removed_on_error(temp_name: str) -> Iterator[None]:
+    """Remove the temporary file if the block raises (anything, KeyboardInterrupt too)."""
+    try:
+        yield
+    except BaseException:
+        with contextlib.suppress(FileNotFoundError):
+            os.unlink(temp_name)
+        raise
+
+
 def _commit(temp_name: str, final: Path) -> Path:
     os.replace(temp_name, final)
     fsync_directory(final.parent)
@@ -121,15 +132,10 @@ def atomic_write(path: str | os.PathLike[str], write: Callable[[IO[bytes]], None
     """
     final = Path(path)
     fd, temp_name = _temporary(final)
-    try:
-        with os.fdopen(fd, "wb") as stream:
-            write(stream)
-            stream.flush()
-            os.fsync(stream.fileno())
-    except BaseException:
-        with contextlib.suppress(FileNotFoundError):
-            os.unlink(temp_name)
-        raise
+    with _removed_on_error(temp_name), os.fdopen(fd, "wb") as stream:
+        write(stream)
+        stream.flush()
+        os.fsync(stream.fileno())
     return _commit(temp_name, final)
 
 
@@ -155,16 +161,12 @@ def atomic_write_path(path: str | os.PathLike[str], write: Callable[[Path], None
     final = Path(path)
     fd, temp_name = _temporary(final)
     os.close(fd)
-    try:
+    with _removed_on_error(temp_name):
         mode = os.stat(temp_name).st_mode
         write(Path(temp_name))
         os.chmod(temp_name, mode)  # a library that recreated the file gets the mode back
         with open(temp_name, "rb") as stream:
             os.fsync(stream.fileno())
-    except BaseException:
-        with contextlib.suppress(FileNotFoundError):
-            os.unlink(temp_name)
-        raise
     return _commit(temp_name, final)
 
 

@@ -45,6 +45,7 @@ __all__ = [
     "build_target",
     "default_sampler",
     "default_starts",
+    "emulator_algebra",
     "sample",
 ]
 
@@ -246,8 +247,16 @@ def build_target(
             f"got {len(priors)} priors for the emulator's {len(emulator.parameter_names)} "
             f"parameters {list(emulator.parameter_names)}"
         )
-    alg = make_algebra(
-        algebra,
+    alg = emulator_algebra(emulator, w_star, algebra)
+    return CalibrationPosterior(alg, priors, emulator.lam_prior, lam_star_prior)
+
+
+def emulator_algebra(
+    emulator: Emulator, w_star: ArrayLike, kind: Kind = "kronecker"
+) -> CalibrationAlgebra:
+    """The back end of eq. 12 from a trained emulator and observed weights ``(m*, p)``."""
+    return make_algebra(
+        kind,
         emulator.theta,
         emulator.x,
         emulator.kernels,
@@ -255,7 +264,6 @@ def build_target(
         emulator.w,
         w_star,
     )
-    return CalibrationPosterior(alg, priors, emulator.lam_prior, lam_star_prior)
 
 
 def default_sampler(target: CalibrationPosterior, n_burn: int) -> MetropolisWithinGibbs:

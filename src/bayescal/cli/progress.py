@@ -15,6 +15,7 @@ from collections.abc import Callable, Mapping
 from typing import TYPE_CHECKING, Any
 
 from bayescal.metrics import KEY_COLUMNS, Metrics, metric_columns
+from bayescal.runner import Progress
 
 if TYPE_CHECKING:
     from bayescal.pipeline import Results
@@ -154,6 +155,39 @@ def mcmc_bar(quiet: bool) -> Callable[[str, int], tuple[Tick, Callable[[], None]
 def progress_options(quiet: bool) -> dict[str, Any]:
     """The progress callbacks of :class:`bayescal.pipeline.Options`: a bar for the
     simulations (none when ``quiet``) and one per MCMC stage (disabled when ``quiet``)."""
-    from bayescal.runner import tqdm_progress
+    return {"progress": None if quiet else simulation_bar, "mcmc_progress": mcmc_bar(quiet)}
 
-    return {"progress": None if quiet else tqdm_progress, "mcmc_progress": mcmc_bar(quiet)}
+
+def simulation_bar(total: int, desc: str = "simulations") -> tuple[Progress, Callable[[], None]]:
+    """A progress callback that draws a tqdm bar (with ETA), and the function that closes it.
+
+    Parameters
+    ----------
+    total
+        Number of runs in the design.
+    desc
+        Label of the bar.
+
+    Returns
+    -------
+    tuple
+        ``(progress, close)``: pass ``progress`` to :func:`bayescal.runner.run_design`, call
+        ``close()`` afterwards. Runs loaded from the cache on the first call do
+        not count towards the rate, so the ETA reflects real runs.
+    """
+    from tqdm.auto import tqdm
+
+    bar = tqdm(total=total, desc=desc, unit="run")
+    state = {"first": True}
+
+    def progress(done: int, failed: int, total: int) -> None:
+        count = done + failed
+        if state["first"]:
+            bar.initial = bar.n = count
+            bar.last_print_n = count
+            state["first"] = False
+        else:
+            bar.update(count - bar.n)
+        bar.set_postfix(failed=failed, refresh=True)
+
+    return progress, bar.close

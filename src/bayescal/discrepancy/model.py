@@ -47,8 +47,9 @@ from typing import TYPE_CHECKING, Literal
 import numpy as np
 from numpy.typing import ArrayLike
 
-from bayescal.calibration.kron import Kind, make_algebra
+from bayescal.calibration.kron import Kind
 from bayescal.calibration.posterior import Posterior, check_priors
+from bayescal.calibration.target import emulator_algebra
 from bayescal.design import Prior
 from bayescal.discrepancy.delta_gp import MAX_COMPONENTS, DeltaGP, Trend, fit_delta_gp
 from bayescal.discrepancy.phase import DeltaPhase, EmpiricalDeltaSampler
@@ -347,15 +348,7 @@ def estimate_discrepancy(
     _check_match(emulator, assembled, posterior)
     prior_map = default_priors(posterior) if priors is None else check_priors(assembled, priors)
     lam, lam_star = float(np.mean(posterior.lam)), float(np.mean(posterior.lam_star))
-    alg = make_algebra(
-        algebra,
-        emulator.theta,
-        emulator.x,
-        emulator.kernels,
-        emulator.basis.ktk,
-        emulator.w,
-        assembled.w_star,
-    )
+    alg = emulator_algebra(emulator, assembled.w_star, algebra)
     phase = DeltaPhase(
         emulator, assembled.y_star_std, alg, list(prior_map.values()), lam, lam_star, realisations
     )

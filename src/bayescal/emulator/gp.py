@@ -339,7 +339,7 @@ class Emulator:
 
         Each run is predicted from the other ``R - 1`` in closed form
         (:meth:`_Conditional.leave_one_run_out`); equal to refitting without the
-        run to rounding (``tests/test_gp.py``).
+        run to rounding (``tests/emulator/test_gp.py``).
 
         Returns
         -------

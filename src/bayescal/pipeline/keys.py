@@ -6,7 +6,7 @@ settings it reads and the keys of the stages before it). The runner
 (:class:`bayescal.store.stages.StageLog`) equals the key it computes now.
 The keys cover settings and inputs, not bayescal's own code. An output folder
 written by an earlier bayescal is reused as long as these functions give the
-same keys (``tests/test_stage_keys.py`` pins them for the wall example).
+same keys (``tests/pipeline/test_stage_keys.py`` pins them for the wall example).
 """
 
 from __future__ import annotations

@@ -209,6 +209,9 @@ def _emulator(r: _Runner, sims: RunResults) -> EmulatorResult:
         r.out / emulator_store.FILE,
         r.ctx.study.config_hash(),
         parameter_units=_parameter_units(r.ctx),
+        inputs=emulator_store.CalibrationInputs(
+            em.assembled.w_star, em.assembled.y_star_std, em.assembled.lam_star_prior
+        ),
     )
     emulator_store.save_emulator_cv(em.loo, r.out / emulator_store.CV_FILE)
     for name, rmse in em.loo.rmse.items():

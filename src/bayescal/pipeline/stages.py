@@ -82,7 +82,7 @@ class Options:
         ``"processes"`` (MCMC chains in parallel) or ``"serial"``.
     progress
         Factory of a simulation progress callback: ``total -> (progress, close)``
-        (see :func:`bayescal.runner.tqdm_progress`), called only when runs are due.
+        (see :func:`bayescal.cli.progress.simulation_bar`), called only when runs are due.
     mcmc_progress
         Factory of an MCMC progress callback: ``(description, total) -> (tick, close)``.
     checkpoint_seconds

@@ -14,7 +14,7 @@ Modules
 
 from bayescal.runner.cache import Progress
 from bayescal.runner.keys import forcing_fingerprint, run_key, simulator_fingerprint
-from bayescal.runner.run import BACKENDS, Backend, RunFailure, RunResults, run_design, tqdm_progress
+from bayescal.runner.run import BACKENDS, Backend, RunFailure, RunResults, run_design
 
 __all__ = [
     "BACKENDS",
@@ -26,5 +26,4 @@ __all__ = [
     "run_design",
     "run_key",
     "simulator_fingerprint",
-    "tqdm_progress",
 ]

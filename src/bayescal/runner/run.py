@@ -63,7 +63,7 @@ from bayescal.simulators.base import Forcing, Simulator
 if TYPE_CHECKING:  # not at run time: worker processes start faster without scipy.stats
     from bayescal.design import Design
 
-__all__ = ["BACKENDS", "Backend", "RunFailure", "RunResults", "run_design", "tqdm_progress"]
+__all__ = ["BACKENDS", "Backend", "RunFailure", "RunResults", "run_design"]
 
 Backend = Literal["serial", "processes", "dask"]
 BACKENDS: tuple[str, ...] = ("serial", "processes", "dask")
@@ -361,7 +361,7 @@ def run_design(
         Further attempts for a failed run before it is given up.
     progress
         Called as ``progress(done, failed, total)`` once the cache is read and
-        after every finished or failed run (see :func:`tqdm_progress`).
+        after every finished or failed run (see :func:`bayescal.cli.progress.simulation_bar`).
 
     Returns
     -------
@@ -451,38 +451,3 @@ def _collect(
         n_cached=n_cached,
         n_attempts=ledger.attempts,
     )
-
-
-def tqdm_progress(total: int, desc: str = "simulations") -> tuple[Progress, Callable[[], None]]:
-    """A progress callback that draws a tqdm bar (with ETA), and the function that closes it.
-
-    Parameters
-    ----------
-    total
-        Number of runs in the design.
-    desc
-        Label of the bar.
-
-    Returns
-    -------
-    tuple
-        ``(progress, close)``: pass ``progress`` to :func:`run_design`, call
-        ``close()`` afterwards. Runs loaded from the cache on the first call do
-        not count towards the rate, so the ETA reflects real runs.
-    """
-    from tqdm.auto import tqdm
-
-    bar = tqdm(total=total, desc=desc, unit="run")
-    state = {"first": True}
-
-    def progress(done: int, failed: int, total: int) -> None:
-        count = done + failed
-        if state["first"]:
-            bar.initial = bar.n = count
-            bar.last_print_n = count
-            state["first"] = False
-        else:
-            bar.update(count - bar.n)
-        bar.set_postfix(failed=failed, refresh=True)
-
-    return progress, bar.close

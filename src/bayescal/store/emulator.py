@@ -21,7 +21,7 @@ from __future__ import annotations
 import json
 import os
 from collections.abc import Sequence
-from dataclasses import asdict
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any, Final
 
@@ -31,6 +31,7 @@ import xarray as xr
 from bayescal.atomic import atomic_write_npz, read_npz
 from bayescal.emulator.basis import Basis, InputPCA, Normaliser, SeriesPCA
 from bayescal.emulator.gp import ConditionalPieces, Emulator, HyperPriors, LooResult
+from bayescal.errors import DataError
 from bayescal.store.netcdf import (
     DIMENSIONLESS,
     check_format,
@@ -45,7 +46,9 @@ __all__ = [
     "CV_FILE",
     "EMULATOR_FORMAT",
     "FILE",
+    "CalibrationInputs",
     "emulator_dataset",
+    "load_calibration_inputs",
     "load_emulator",
     "load_emulator_cv",
     "save_emulator",
@@ -83,6 +86,9 @@ _DESCRIPTIONS: dict[str, str] = {
     "cond_h": "rotated weights per basis (conditional pieces)",
     "x_lower": "lower bound of each variable input before normalisation",
     "x_upper": "upper bound of each variable input before normalisation",
+    "w_star": "basis weights of the measured training periods (eq. 13)",
+    "y_star_std": "standardised measured training periods (samples x periods)",
+    "lam_star_prior": "Gamma(shape, rate) prior of lambda* after eq. 7",
 }
 
 
@@ -120,8 +126,34 @@ def _attributes(em: Emulator, parameter_units: Sequence[str]) -> dict[str, tuple
     return out
 
 
+@dataclass(frozen=True)
+class CalibrationInputs:
+    """What a calibration needs beside the emulator, as stored in ``emulator.nc``.
+
+    With the emulator and the theta* priors (``design.csv``) it rebuilds the
+    calibration target from files alone
+    (:func:`bayescal.calibration.target.build_target`).
+
+    Attributes
+    ----------
+    w_star
+        Observed weights of the training periods ``(m*, p)`` (eq. 13). [-]
+    y_star_std
+        Standardised measured training periods ``(N, m*)``. [-]
+    lam_star_prior
+        Gamma ``(shape, rate)`` of ``lambda*`` after eq. 7.
+    """
+
+    w_star: np.ndarray
+    y_star_std: np.ndarray
+    lam_star_prior: tuple[float, float]
+
+
 def emulator_dataset(
-    emulator: Emulator, config_hash: str = "", parameter_units: Sequence[str] = ()
+    emulator: Emulator,
+    config_hash: str = "",
+    parameter_units: Sequence[str] = (),
+    inputs: CalibrationInputs | None = None,
 ) -> xr.Dataset:
     """The emulator as an ``xarray.Dataset`` (what :func:`save_emulator` writes).
 
@@ -134,6 +166,9 @@ def emulator_dataset(
     parameter_units
         Unit of each calibration parameter, in the emulator's parameter order
         (recorded in the ``parameter_units`` attribute; empty where unknown).
+    inputs
+        The measured side of the calibration (stored as ``w_star``,
+        ``y_star_std`` and ``lam_star_prior``), or ``None``.
     """
     em = emulator
     units = list(parameter_units) or [""] * len(em.parameter_names)
@@ -162,6 +197,10 @@ def emulator_dataset(
         "cond_h": (("basis", "run", "period"), em.pieces.h),
         **_input_pca_vars(em.inputs),
     }
+    if inputs is not None:
+        variables["w_star"] = (("period", "basis"), inputs.w_star)
+        variables["y_star_std"] = (("sample", "period"), inputs.y_star_std)
+        variables["lam_star_prior"] = (("gamma_parameter",), np.asarray(inputs.lam_star_prior))
     attrs = {
         "format": EMULATOR_FORMAT,
         "parameter_names": json.dumps(list(em.parameter_names)),
@@ -188,6 +227,7 @@ def save_emulator(
     path: str | os.PathLike[str],
     config_hash: str = "",
     parameter_units: Sequence[str] = (),
+    inputs: CalibrationInputs | None = None,
 ) -> Path:
     """Write an emulator to netCDF atomically.
 
@@ -201,13 +241,36 @@ def save_emulator(
         Hash of the study configuration that produced it (recorded, not checked).
     parameter_units
         Unit of each calibration parameter (see :func:`emulator_dataset`).
+    inputs
+        What the calibration needs beside the emulator (see :class:`CalibrationInputs`).
 
     Returns
     -------
     pathlib.Path
         The final path.
     """
-    return write_dataset(emulator_dataset(emulator, config_hash, parameter_units), path)
+    return write_dataset(emulator_dataset(emulator, config_hash, parameter_units, inputs), path)
+
+
+def load_calibration_inputs(path: str | os.PathLike[str]) -> CalibrationInputs:
+    """The measured side of the calibration stored with an emulator.
+
+    Raises
+    ------
+    bayescal.errors.DataError
+        If the file is not an emulator artefact or was saved without them.
+    """
+    ds = read_dataset(path)
+    check_format(ds, EMULATOR_FORMAT, path)
+    if "w_star" not in ds:
+        raise DataError(
+            f"{os.fspath(path)} holds no calibration inputs (written before they were saved)",
+            hint="re-run the emulator stage: bayescal run --from emulator",
+        )
+    prior = ds["lam_star_prior"].values
+    return CalibrationInputs(
+        ds["w_star"].values, ds["y_star_std"].values, (float(prior[0]), float(prior[1]))
+    )
 
 
 def _inputs(ds: xr.Dataset, x: np.ndarray) -> InputPCA:

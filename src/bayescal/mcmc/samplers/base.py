@@ -372,6 +372,15 @@ class Box:
         z[only_hi] = np.log(hi[only_hi] - x[only_hi])
         return z
 
+    def log_jacobians(self, z: NDArray[np.float64]) -> list[float]:
+        """``log |dx_i/dz_i|`` of every coordinate at the sampling values ``z`` (0 if unmapped)."""
+        out = [0.0] * z.size
+        if self.transforms:
+            for i, f in enumerate(self._maps):
+                if f is not None:
+                    out[i] = f(float(z[i]))[1]
+        return out
+
     def to_original(self, z: NDArray[np.float64]) -> tuple[NDArray[np.float64], float]:
         """Sampling scale -> original scale (reflected if need be) and ``log |dx/dz|``."""
         x = np.array(z, dtype=float)

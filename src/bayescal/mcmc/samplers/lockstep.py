@@ -307,12 +307,7 @@ def _initial_states(
                 hint="start inside the support of the prior and likelihood",
             )
     z = np.array([box.to_sampling(row) for row in x])
-    log_jac = np.zeros_like(x)
-    if box.transforms:
-        for i in range(x.shape[1]):
-            f = box.scalar_map(i)
-            if f is not None:
-                log_jac[:, i] = [f(float(v))[1] for v in z[:, i]]
+    log_jac = np.array([box.log_jacobians(row) for row in z], dtype=float).reshape(x.shape)
     scale = np.tile(initial_scales(sampler.scales, box), (x.shape[0], 1))
     accepted = np.zeros(x.shape, dtype=np.int64)
     return _States(x.copy(), z, log_jac, lp, scale, accepted)

@@ -190,11 +190,7 @@ class MetropolisWithinGibbs:
                 hint="start inside the support of the prior and likelihood",
             )
         z = box.to_sampling(x)
-        log_jac = [0.0] * x.size
-        for i in range(x.size):
-            f = box.scalar_map(i)
-            if f is not None and box.transforms:
-                log_jac[i] = f(float(z[i]))[1]
+        log_jac = box.log_jacobians(z)
         return _State(x, z.tolist(), log_jac, lp, initial_scales(self.scales, box).tolist(), [])
 
     def adaptation(self, n_batch: int) -> tuple[float, float]:
