@@ -33,7 +33,7 @@ from typing import Any  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "helpers"))
 
 from bayescal.design import latin_hypercube  # noqa: E402
 from bayescal.runner import run_design  # noqa: E402

@@ -409,7 +409,7 @@ def training(case: Case, pb: Problem, rng: np.random.Generator) -> tuple[float, 
 
 def profile_mcmc(top: int) -> None:
     """cProfile of one emulator training and one calibration MCMC (virtual wall, 30x25)."""
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "helpers"))
     from bayescal.calibration.posterior import calibrate
     from bayescal.emulator.assemble import assemble
     from bayescal.emulator.training import train

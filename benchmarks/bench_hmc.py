@@ -48,7 +48,7 @@ from typing import Any  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "helpers"))
 
 from bayescal.calibration import hmc  # noqa: E402
 from bayescal.calibration.kron import make_algebra  # noqa: E402

@@ -39,7 +39,7 @@ import time  # noqa: E402
 from dataclasses import dataclass  # noqa: E402
 from pathlib import Path  # noqa: E402
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "helpers"))
 
 from bayescal.calibration.kron import make_algebra  # noqa: E402
 from bayescal.calibration.target import CalibrationPosterior, default_sampler, default_starts  # noqa: E402

@@ -8,11 +8,11 @@ They are frozen objects: a test cannot change what another sees.
 from __future__ import annotations
 
 import pytest
-from virtual_wall import VirtualExperiment, virtual_experiment
 
 from bayescal.emulator.assemble import Assembled, assemble
 from bayescal.emulator.gp import Emulator
 from bayescal.emulator.training import train
+from virtual_wall import VirtualExperiment, virtual_experiment
 
 
 @pytest.fixture(scope="session")

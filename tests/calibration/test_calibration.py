@@ -7,7 +7,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from virtual_wall import PRIORS, VirtualExperiment, random_truth, virtual_experiment
 
 from bayescal.calibration.kron import make_algebra
 from bayescal.calibration.posterior import Posterior, calibrate
@@ -17,6 +16,7 @@ from bayescal.emulator.assemble import Assembled, assemble
 from bayescal.emulator.gp import Emulator
 from bayescal.emulator.training import train
 from bayescal.errors import ConfigError
+from virtual_wall import PRIORS, VirtualExperiment, random_truth, virtual_experiment
 
 NAMES = ("k_cb", "cp_cb", "cp_fb")
 VARIANCE = 0.99  # basis variance fraction; see test_default_basis_* for 0.90

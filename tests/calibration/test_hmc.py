@@ -13,8 +13,6 @@ from typing import Any
 
 import numpy as np
 import pytest
-from paths import FIXTURES
-from virtual_wall import VirtualExperiment
 
 from bayescal.calibration import hmc
 from bayescal.calibration.kron import make_algebra
@@ -29,6 +27,8 @@ from bayescal.errors import ConfigError
 from bayescal.mcmc import nuts
 from bayescal.optional import module_installed
 from bayescal.pipeline import stages
+from paths import FIXTURES
+from virtual_wall import VirtualExperiment
 
 HAS_JAX = all(module_installed(m) for m in ("jax", "blackjax"))
 needs_jax = pytest.mark.skipif(not HAS_JAX, reason="the extra bayescal[hmc] is not installed")

@@ -13,7 +13,6 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
-from paths import SHARED_DATA
 from scipy.optimize import least_squares
 
 from bayescal import examples
@@ -21,6 +20,7 @@ from bayescal.config import WallSimulator, load_study
 from bayescal.emulator.assemble import runs_to_columns
 from bayescal.examples import copy_example
 from bayescal.pipeline import Options, Results, run
+from paths import SHARED_DATA
 
 DATA = SHARED_DATA
 DATA_FILE = DATA / "annex58-twinhouse-n2-exp1" / "validationdataN2Exp1.txt"

@@ -10,10 +10,10 @@ from pathlib import Path
 import pandas as pd
 import pytest
 from click.testing import CliRunner
-from paths import FIXTURES, REPO
 
 from bayescal import __version__
 from bayescal.cli import main
+from paths import FIXTURES, REPO
 
 FIXTURE = FIXTURES / "wall-study"
 SHARED = REPO.parent / "shared" / "data"

@@ -6,8 +6,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-import sims_for_tests as sims
 
+import sims_for_tests as sims
 from bayescal.cli.progress import simulation_bar
 from bayescal.design import UniformPrior, latin_hypercube
 from bayescal.runner import run_design

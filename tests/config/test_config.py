@@ -11,7 +11,6 @@ from typing import Any, Literal
 
 import pydantic
 import pytest
-from paths import FIXTURES
 
 import bayescal.config
 from bayescal.config import (
@@ -26,6 +25,7 @@ from bayescal.errors import ConfigError
 from bayescal.simulators.box import TestBox
 from bayescal.simulators.fvm import Layer
 from bayescal.simulators.wall import MultilayerWall
+from paths import FIXTURES
 
 FIXTURE = FIXTURES / "wall-study"
 BASE = tomllib.loads((FIXTURE / "study.toml").read_text(encoding="utf-8"))

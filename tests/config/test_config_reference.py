@@ -1,8 +1,7 @@
 """The committed study-file reference is the one generated from the models."""
 
-from paths import REPO
-
 from bayescal.config.reference import study_reference_markdown
+from paths import REPO
 
 DOC = REPO / "docs" / "study-file.md"
 

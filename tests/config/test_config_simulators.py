@@ -18,8 +18,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 from click.testing import CliRunner
-from paths import FIXTURES, PROGRAMS
-from rc_reference import rc_exact
 
 from bayescal.cli import main
 from bayescal.config import build_simulator, load_study
@@ -28,6 +26,8 @@ from bayescal.simulate import check_simulation
 from bayescal.simulators.energyplus import PAPER_WALL_MODEL
 from bayescal.simulators.fvm import Layer
 from bayescal.simulators.wall import MultilayerWall
+from paths import FIXTURES, PROGRAMS
+from rc_reference import rc_exact
 
 DATA = FIXTURES
 STEP = 1800.0  # the fixtures' clock [s]

@@ -9,7 +9,6 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
-from paths import FIXTURES
 
 from bayescal.clock import format_duration, parse_duration, parse_time_zone
 from bayescal.config import load_study
@@ -22,6 +21,7 @@ from bayescal.data.align import (
 )
 from bayescal.data.measured import load_measured
 from bayescal.errors import DataError
+from paths import FIXTURES
 
 FIXTURE = FIXTURES / "wall-study"
 UTC = UTC

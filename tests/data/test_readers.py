@@ -11,7 +11,6 @@ import pandas as pd
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
-from paths import FIXTURES, SHARED_DATA
 
 from bayescal.clock import parse_time_zone
 from bayescal.data.readers import (
@@ -23,6 +22,7 @@ from bayescal.data.readers import (
 )
 from bayescal.errors import DataError
 from bayescal.simulators.epw_format import EPW_FIELDS
+from paths import FIXTURES, SHARED_DATA
 
 FIXTURE_CSV = FIXTURES / "wall-study" / "wall.csv"
 SHARED = SHARED_DATA

@@ -9,7 +9,6 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
-from virtual_wall import NOISE_VARIANCE, PER_DAY, VirtualExperiment, virtual_experiment
 
 from bayescal.calibration.kron import make_algebra
 from bayescal.calibration.posterior import Posterior, calibrate
@@ -28,6 +27,7 @@ from bayescal.emulator.gp import Emulator
 from bayescal.emulator.training import train
 from bayescal.errors import ConfigError
 from bayescal.store.discrepancy import load_discrepancy, save_discrepancy
+from virtual_wall import NOISE_VARIANCE, PER_DAY, VirtualExperiment, virtual_experiment
 
 BIAS_PER_KELVIN = 0.05  # injected sensor error per K of outdoor surface temperature [W/m²K]
 

@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from virtual_wall import PER_DAY, VirtualExperiment, virtual_experiment
 
 from bayescal.emulator.assemble import assemble, runs_to_columns
 from bayescal.errors import DataError
+from virtual_wall import PER_DAY, VirtualExperiment, virtual_experiment
 
 
 @pytest.fixture(scope="module")

@@ -9,7 +9,6 @@ import pickle
 import numpy as np
 import pytest
 from scipy import integrate, stats
-from virtual_wall import VirtualExperiment, random_truth, simulate
 
 from bayescal.emulator.assemble import Assembled
 from bayescal.emulator.dense import dense_training_logpdf
@@ -18,6 +17,7 @@ from bayescal.emulator.hyper import HyperLayout, log_prior_beta
 from bayescal.emulator.kernel import SeparableKernel
 from bayescal.emulator.training import TrainingPosterior
 from bayescal.errors import DataError
+from virtual_wall import VirtualExperiment, random_truth, simulate
 
 
 def _small_problem(seed: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:

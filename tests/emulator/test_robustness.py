@@ -3,12 +3,12 @@
 from __future__ import annotations
 
 import numpy as np
-from virtual_wall import virtual_experiment
 
 from bayescal.calibration.posterior import calibrate
 from bayescal.design import Design
 from bayescal.emulator.assemble import assemble
 from bayescal.emulator.training import TrainingPosterior, train
+from virtual_wall import virtual_experiment
 
 
 def test_near_duplicate_runs_and_rho_near_one_stay_finite() -> None:

@@ -24,7 +24,6 @@ import numpy as np
 import pandas as pd
 import pytest
 from click.testing import CliRunner
-from paths import REPO
 
 from bayescal.cli import main
 from bayescal.design import UniformPrior, latin_hypercube
@@ -32,6 +31,7 @@ from bayescal.emulator.assemble import assemble
 from bayescal.emulator.basis import pca_basis
 from bayescal.errors import DataError
 from bayescal.periods import layout_periods
+from paths import REPO
 
 HERE = Path(__file__).resolve().parent
 WALL = REPO / "src" / "bayescal" / "examples" / "wall"

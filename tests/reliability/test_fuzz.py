@@ -24,12 +24,12 @@ import pandas as pd
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
-from paths import REPO
 
 from bayescal.config import load_study, study_from_dict
 from bayescal.data import load_measured
 from bayescal.data.readers import read_csv, read_epw, read_modelica_table, read_parquet
 from bayescal.errors import BayescalError
+from paths import REPO
 
 WALL = REPO / "src" / "bayescal" / "examples" / "wall"
 WALL_TOML = (WALL / "study.toml").read_text(encoding="utf-8")

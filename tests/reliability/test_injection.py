@@ -31,12 +31,12 @@ import numpy as np
 import pandas as pd
 import pytest
 from click.testing import CliRunner
-from paths import REPO
 
 from bayescal.cli import main
 from bayescal.config import build_simulator, load_study
 from bayescal.data import load_measured
 from bayescal.errors import ConfigError
+from paths import REPO
 
 WALL = REPO / "src" / "bayescal" / "examples" / "wall"
 SENTINEL = "PWNED"

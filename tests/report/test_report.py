@@ -15,7 +15,6 @@ import numpy as np
 import pandas as pd
 import pytest
 import xarray as xr
-from virtual_wall import PRIORS, VirtualExperiment, simulate, virtual_experiment
 
 from bayescal.calibration.posterior import Posterior, calibrate
 from bayescal.emulator.assemble import Assembled, assemble
@@ -32,6 +31,7 @@ from bayescal.report import figures as fg
 from bayescal.report.html import ReportInputs, render, write_report
 from bayescal.report.study import delta_correlation
 from bayescal.runner import RunFailure
+from virtual_wall import PRIORS, VirtualExperiment, simulate, virtual_experiment
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 SECTIONS = (

@@ -13,9 +13,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-import sims_for_tests as sims
-from paths import HELPERS
 
+import sims_for_tests as sims
 from bayescal.design import UniformPrior, latin_hypercube
 from bayescal.errors import ConfigError, SimulatorError
 from bayescal.runner import (
@@ -27,6 +26,7 @@ from bayescal.runner import (
 )
 from bayescal.simulators.base import Forcing
 from bayescal.simulators.wrappers import SensorModel, TargetedSimulator
+from paths import HELPERS
 
 HERE = HELPERS
 N = 48

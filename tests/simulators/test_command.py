@@ -13,12 +13,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from paths import PROGRAMS
-from rc_reference import rc_numerical
 
 from bayescal.errors import ConfigError, SimulatorError
 from bayescal.simulators.base import Forcing, Simulator
 from bayescal.simulators.command import CommandFailed, CommandSimulator
+from paths import PROGRAMS
+from rc_reference import rc_numerical
 
 STEP = 600.0  # [s]
 TEMPLATE = "R = $R\nC = ${C}\nT0 = $T0\n# a literal dollar: $$5\n"

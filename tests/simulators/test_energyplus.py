@@ -12,10 +12,10 @@ import json
 import pickle
 from pathlib import Path
 
-import iso13786 as iso
 import numpy as np
 import pytest
 
+import iso13786 as iso
 from bayescal.errors import SimulatorError
 from bayescal.simulators.base import Forcing, Simulator
 from bayescal.simulators.energyplus import (

@@ -20,12 +20,11 @@ import pytest
 pytest.importorskip("fmpy", reason="FMPy is an optional dependency (bayescal[fmu])")
 
 import fmu_build
-from rc_reference import rc_exact, rc_numerical
-
 from bayescal.errors import ConfigError, SimulatorError
 from bayescal.simulators import fmu as fmu_module
 from bayescal.simulators.base import Forcing, Simulator
 from bayescal.simulators.fmu import FmuSimulator
+from rc_reference import rc_exact, rc_numerical
 
 STEP = 600.0  # [s]
 R, C, T0 = 0.5, 2.0e4, 20.0  # [m²K/W], [J/(m²K)], [°C]: tau = 1e4 s, 16.7 steps

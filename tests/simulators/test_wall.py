@@ -9,16 +9,16 @@ from __future__ import annotations
 
 import pickle
 
-import iso13786 as iso
 import numpy as np
 import pytest
-from paths import SHARED_DATA
 from scipy.linalg import solve_banded
 
+import iso13786 as iso
 from bayescal.errors import SimulatorError
 from bayescal.simulators.base import Forcing, Simulator
 from bayescal.simulators.fvm import Layer
 from bayescal.simulators.wall import MultilayerWall
+from paths import SHARED_DATA
 
 GF = (0.027, 0.0316, 116.6, 840.0)  # glass-fibre board: d, k, rho, c
 CB = (0.15, 0.12, 552.0, 800.0)  # aerated concrete

@@ -13,7 +13,6 @@ import numpy as np
 import pandas as pd
 import pytest
 import xarray as xr
-from virtual_wall import virtual_experiment
 
 from bayescal.calibration.posterior import Posterior, calibrate
 from bayescal.calibration.target import build_target
@@ -28,6 +27,7 @@ from bayescal.store.emulator import (
     save_emulator,
 )
 from bayescal.store.posterior import load_posterior, save_posterior, save_posterior_summary
+from virtual_wall import virtual_experiment
 
 
 @pytest.fixture(scope="module")
