@@ -45,6 +45,7 @@ memos of what a Gibbs sweep leaves unchanged), :mod:`bayescal.calibration.batch`
 
 from __future__ import annotations
 
+import copy
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any, Literal, Protocol
@@ -114,6 +115,49 @@ def _schur_basis(
     resid = cache.obs - p_obs @ u
     try:
         chol = linalg.cholesky(schur_mat, lower=True, check_finite=False)
+    except np.linalg.LinAlgError as exc:
+        raise np.linalg.LinAlgError(
+            "observed-block Schur complement is not positive definite"
+        ) from exc
+    half = linalg.solve_triangular(chol, resid, lower=True, check_finite=False)
+    logdet += 2.0 * float(np.sum(np.log(np.diag(chol))))
+    return LogDensity.from_pieces(logdet, quad + float(half @ half), size)
+
+
+def _grouped_bases(
+    caches: Sequence[BasisPieces],
+    sims: Sequence[_SimBlock],
+    cs: Sequence[FloatArray],
+    noise: FloatArray,
+) -> LogDensity:
+    """Bases whose observed weights share a noise block, by one joint Schur complement.
+
+    The observed block of the ``q`` bases (rows basis-major: basis ``j``,
+    period ``i``) is ``blockdiag_j(tau_j^-1 S_x,j[O, O]) + noise ⊗ I_m_obs``: the
+    GP is independent between bases, the noise of a period's weights is not
+    (AR(1) errors, :mod:`bayescal.calibration.noise`). Each basis's simulator
+    block stays Kronecker; the ``(q m_obs)``-row Schur complement is factorised.
+    """
+    logdet = quad = 0.0
+    m_obs = caches[0].obs.size
+    q = len(caches)
+    schur = np.kron(noise, np.eye(m_obs))
+    resid = np.empty(q * m_obs)
+    size = 0
+    for j, (cache, sim, c) in enumerate(zip(caches, sims, cs, strict=True)):
+        lx = cache.eig_x.values
+        c_hat = cache.eig_theta.vectors.T @ c
+        u = lx * (c_hat @ sim.h)
+        g = lx * lx * ((c_hat * c_hat) @ sim.inv_den)
+        rows = slice(j * m_obs, (j + 1) * m_obs)
+        p_obs = cache.p_obs
+        schur[rows, rows] += cache.kernel.variance * cache.sx_obs - (p_obs * g) @ p_obs.T
+        resid[rows] = cache.obs - p_obs @ u
+        logdet += sim.logdet
+        quad += sim.quad
+        size += sim.h.size + m_obs
+    try:
+        chol = linalg.cholesky(schur, lower=True, check_finite=False)
     except np.linalg.LinAlgError as exc:
         raise np.linalg.LinAlgError(
             "observed-block Schur complement is not positive definite"
@@ -269,9 +313,61 @@ class KronCalibrationDensity:
         return self._grid
 
     def with_observations(self, w_star: ArrayLike) -> KronCalibrationDensity:
-        """A new density with other observed weights (e.g. re-estimated by eq. 20)."""
+        """A new density with other observed weights (e.g. re-estimated by eq. 20).
+
+        The eigen-decompositions are reused (:meth:`StackedGrid.with_observations`):
+        a new ``w*`` costs ``O(p m*^2)``.
+        """
+        new = copy.copy(self)
+        new._grid = self._grid.with_observations(w_star)
+        new._data = new._grid.data
+        new._reset_memos()
+        return new
+
+    def pieces_grouped(
+        self,
+        theta_star: ArrayLike,
+        a: ArrayLike,
+        a_star: ArrayLike,
+        groups: Sequence[tuple[Sequence[int], FloatArray]],
+    ) -> LogDensity:
+        """Log-density when some bases' observed weights share a noise block per period.
+
+        Parameters
+        ----------
+        theta_star
+            Calibration parameters ``(t,)``, scaled to [0, 1]. [-]
+        a
+            Simulator nuggets ``(p,)``. [-]
+        a_star
+            Observation nuggets ``(p,)`` of the bases in no group (others ignored). [-]
+        groups
+            ``(bases, noise)``: the bases of one output and the covariance
+            ``(q, q)`` of their observed weights' noise in every period. [-]
+        """
+        if self._method != "schur":
+            raise ValueError("grouped observation noise needs method 'schur'")
         d = self._data
-        return type(self)(d.theta, d.x, d.kernels, d.ktk, d.w, w_star, d.obs_index, self._method)
+        ts = np.asarray(theta_star, dtype=float).reshape(1, -1)
+        a_arr = np.broadcast_to(np.asarray(a, dtype=float), (d.n_bases,))
+        as_arr = np.broadcast_to(np.asarray(a_star, dtype=float), (d.n_bases,))
+        grouped = {j for bases, _ in groups for j in bases}
+        diff = d.theta - ts
+        bases = self._grid.bases
+        cs = [b.kernel.variance * np.exp(-((diff * diff) @ b.beta_theta)) for b in bases]
+        total = LogDensity.zero()
+        for j, cache in enumerate(bases):
+            if j not in grouped:
+                nug = np.full(d.obs_index.size, float(as_arr[j]))
+                sim = self._sim(j, float(a_arr[j]))
+                total = total + _schur_basis(cache, sim, cs[j], nug, self._full_grid)
+        for members, noise in groups:
+            idx = list(members)
+            sims = [self._sim(j, float(a_arr[j])) for j in idx]
+            total = total + _grouped_bases(
+                [bases[j] for j in idx], sims, [cs[j] for j in idx], np.asarray(noise, float)
+            )
+        return total
 
     def pieces_nuggets(self, theta_star: ArrayLike, a: ArrayLike, a_star: ArrayLike) -> LogDensity:
         """Log-density summed over bases for explicit nuggets.
@@ -440,6 +536,14 @@ class CalibrationAlgebra(Protocol):
     ) -> LogDensity: ...
 
     def pieces(self, theta_star: ArrayLike, lam: float, lam_star: ArrayLike) -> LogDensity: ...
+
+    def pieces_grouped(
+        self,
+        theta_star: ArrayLike,
+        a: ArrayLike,
+        a_star: ArrayLike,
+        groups: Sequence[tuple[Sequence[int], FloatArray]],
+    ) -> LogDensity: ...
 
     def logpdf(self, theta_star: ArrayLike, lam: float, lam_star: ArrayLike) -> float: ...
 

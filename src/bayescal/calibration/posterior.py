@@ -36,6 +36,7 @@ from numpy.typing import ArrayLike
 
 from bayescal.calibration.hmc import sample_nuts_isolated
 from bayescal.calibration.kron import Kind
+from bayescal.calibration.noise import ObservationModel, OutputNoise
 from bayescal.calibration.target import (
     LAMBDA_NAMES,
     CalibrationPosterior,
@@ -63,7 +64,7 @@ SamplerKind = Literal["mwg", "nuts"]
 
 @dataclass(frozen=True)
 class Posterior:
-    """Draws of theta* (physical units), lambda and lambda*, with diagnostics.
+    """Draws of theta* (physical units), the precisions and error parameters, with diagnostics.
 
     Attributes
     ----------
@@ -73,30 +74,38 @@ class Posterior:
         Parameter name -> prior used in the calibration.
     unit_draws
         theta* on the normalised scale, ``(chains, draws, t)``. [-]
-    lam, lam_star
-        Precision draws ``(chains, draws)``. [-]
+    aux_names
+        Names of the other sampled coordinates: ``lambda``, then one
+        ``lambda_star`` per output, then one ``phi`` per output with AR(1)
+        errors (``("lambda", "lambda_star")`` for the paper's one white output).
+    aux
+        Their draws ``(chains, draws, k)``. [-]
     log_density
         Log posterior (up to a constant) at the draws ``(chains, draws)``.
     acceptance
-        Acceptance rate per chain and coordinate ``(chains, t + 2)``.
+        Acceptance rate per chain and coordinate ``(chains, t + k)``.
     seed
         Root seed of the chains.
     algebra
         ``"kronecker"`` or ``"dense"``.
     diagnostics
-        R-hat, ESS, MCSE and the list of warnings (over theta*, lambda, lambda*).
+        R-hat, ESS, MCSE and the list of warnings (over theta* and ``aux``).
+    noise
+        The outputs' error models (:class:`~bayescal.calibration.noise.OutputNoise`),
+        for the noise in physical units; empty where unknown.
     """
 
     names: tuple[str, ...]
     priors: Mapping[str, Prior]
     unit_draws: FloatArray
-    lam: FloatArray
-    lam_star: FloatArray
+    aux_names: tuple[str, ...]
+    aux: FloatArray
     log_density: FloatArray
     acceptance: FloatArray
     seed: int
     algebra: str
     diagnostics: Diagnostics
+    noise: tuple[OutputNoise, ...] = ()
 
     @classmethod
     def build(
@@ -104,39 +113,80 @@ class Posterior:
         names: Sequence[str],
         priors: Mapping[str, Prior],
         unit_draws: ArrayLike,
-        lam: ArrayLike,
-        lam_star: ArrayLike,
-        log_density: ArrayLike,
-        acceptance: ArrayLike,
-        seed: int,
-        algebra: str,
+        lam: ArrayLike | None = None,
+        lam_star: ArrayLike | None = None,
+        log_density: ArrayLike = (),
+        acceptance: ArrayLike = (),
+        seed: int = 0,
+        algebra: str = "kronecker",
         sampler_warnings: Sequence[str] = (),
+        *,
+        aux: ArrayLike | None = None,
+        aux_names: Sequence[str] = LAMBDA_NAMES,
+        noise: Sequence[OutputNoise] = (),
     ) -> Posterior:
         """Assemble the posterior and compute its diagnostics (physical units).
 
-        ``sampler_warnings`` (e.g. NUTS divergences) are appended to the
-        diagnostics' warnings.
+        Give either ``lam`` and ``lam_star`` (one white output) or ``aux`` with
+        its ``aux_names``. ``sampler_warnings`` (e.g. NUTS divergences) are
+        appended to the diagnostics' warnings.
         """
         unit = np.asarray(unit_draws, dtype=float)
-        lam_arr, lam_s = np.asarray(lam, dtype=float), np.asarray(lam_star, dtype=float)
+        if aux is None:
+            if lam is None or lam_star is None:
+                raise ValueError("give lam and lam_star, or aux")
+            aux_arr = np.stack(
+                [np.asarray(lam, dtype=float), np.asarray(lam_star, dtype=float)], axis=-1
+            )
+            aux_names = LAMBDA_NAMES
+        else:
+            aux_arr = np.asarray(aux, dtype=float)
+        if aux_arr.shape[:2] != unit.shape[:2] or aux_arr.shape[-1] != len(aux_names):
+            raise ValueError(
+                f"aux draws {aux_arr.shape} do not match theta* draws {unit.shape} and "
+                f"names {list(aux_names)}"
+            )
         phys = np.stack([p.from_unit(unit[..., k]) for k, p in enumerate(priors.values())], axis=-1)
-        everything = np.concatenate([phys, lam_arr[..., None], lam_s[..., None]], axis=-1)
+        everything = np.concatenate([phys, aux_arr], axis=-1)
         acc = np.asarray(acceptance, dtype=float)
-        diag = diagnose(everything, (*names, *LAMBDA_NAMES), acc)
+        diag = diagnose(everything, (*names, *aux_names), acc)
         if sampler_warnings:
             diag = dataclasses.replace(diag, warnings=(*diag.warnings, *sampler_warnings))
         return cls(
             tuple(names),
             dict(priors),
             unit,
-            lam_arr,
-            lam_s,
+            tuple(aux_names),
+            aux_arr,
             np.asarray(log_density, dtype=float),
             acc,
             int(seed),
             str(algebra),
             diag,
+            tuple(noise),
         )
+
+    @property
+    def lam(self) -> FloatArray:
+        """Draws of the simulator precision ``lambda`` ``(chains, draws)``. [-]"""
+        return self.aux[..., 0]
+
+    @property
+    def lam_star(self) -> FloatArray:
+        """Draws of the (first output's) observation precision ``lambda*`` ``(chains, draws)``."""
+        return self.aux[..., 1]
+
+    @property
+    def lam_stars(self) -> FloatArray:
+        """Every output's ``lambda*``, ``(chains, draws, O)``."""
+        n_out = max(1, len(self.noise))
+        return self.aux[..., 1 : 1 + n_out]
+
+    @property
+    def phi(self) -> FloatArray:
+        """AR(1) coefficients of the outputs with AR(1) errors ``(chains, draws, A)``."""
+        n_out = max(1, len(self.noise))
+        return self.aux[..., 1 + n_out :]
 
     @property
     def draws(self) -> FloatArray:
@@ -151,12 +201,20 @@ class Posterior:
 
     @property
     def all_names(self) -> tuple[str, ...]:
-        """``names`` then ``lambda`` and ``lambda_star``."""
-        return (*self.names, *LAMBDA_NAMES)
+        """``names`` then ``aux_names``."""
+        return (*self.names, *self.aux_names)
 
     def all_draws(self) -> FloatArray:
-        """``[theta* (physical), lambda, lambda*]``, ``(chains, draws, t + 2)``."""
-        return np.concatenate([self.draws, self.lam[..., None], self.lam_star[..., None]], axis=-1)
+        """``[theta* (physical), aux]``, ``(chains, draws, t + k)``."""
+        return np.concatenate([self.draws, self.aux], axis=-1)
+
+    def noise_sd(self) -> dict[str, FloatArray]:
+        """Output name -> draws of its noise standard deviation in the output's unit.
+
+        ``s_o / sqrt(lambda*_o)`` with the output's scale ``s_o``; empty where the
+        error models are not known (posteriors from before they were recorded).
+        """
+        return {o.name: o.scale / np.sqrt(self.lam_stars[..., q]) for q, o in enumerate(self.noise)}
 
     def interval(self, level: float = 0.95) -> tuple[FloatArray, FloatArray]:
         """Central credible interval of theta* per parameter (physical units), ``(t,)`` each."""
@@ -165,18 +223,32 @@ class Posterior:
         return np.percentile(flat, tail, axis=0), np.percentile(flat, 100.0 - tail, axis=0)
 
     def summary(self, level: float = 0.95) -> pd.DataFrame:
-        """Mean, SD, credible interval, R-hat and ESS per parameter (physical units)."""
+        """Mean, SD, credible interval, R-hat and ESS per quantity (physical units).
+
+        Rows: the parameters, the sampled precisions and AR(1) coefficients,
+        and the noise standard deviation of each output in its unit
+        (``noise_sd`` or ``noise_sd_<output>``).
+        """
         import pandas as pd
 
         flat = self.all_draws().reshape(-1, len(self.all_names))
         tail = 50.0 * (1.0 - level)
-        table = self.diagnostics.table()
+        table = pd.DataFrame(self.diagnostics.table())
         table["lower"] = np.percentile(flat, tail, axis=0)
         table["upper"] = np.percentile(flat, 100.0 - tail, axis=0)
-        return pd.DataFrame(table)
+        sds = self.noise_sd()
+        if sds:
+            names = ["noise_sd" if len(sds) == 1 else f"noise_sd_{n}" for n in sds]
+            stacked = np.stack(list(sds.values()), axis=-1)
+            extra = pd.DataFrame(diagnose(stacked, names).table())
+            flat_sd = stacked.reshape(-1, len(names))
+            extra["lower"] = np.percentile(flat_sd, tail, axis=0)
+            extra["upper"] = np.percentile(flat_sd, 100.0 - tail, axis=0)
+            table = pd.concat([table, extra])
+        return table
 
     def inference_data(self) -> InferenceData:
-        """ArviZ ``InferenceData``: posterior (physical theta*, lambda, lambda*), lp, seed."""
+        """ArviZ ``InferenceData``: posterior (physical theta*, aux), lp, seed."""
         az = import_arviz()
         draws = self.all_draws()
         posterior = {n: draws[..., k] for k, n in enumerate(self.all_names)}
@@ -221,6 +293,7 @@ def calibrate(
     callback: Callable[[int], None] | None = None,
     checkpoint_dir: str | os.PathLike[str] | None = None,
     checkpoint_seconds: float = 30.0,
+    observations: ObservationModel | None = None,
 ) -> Posterior:
     """Sample theta*, lambda and lambda* (eq. 16) with the hyperparameters at the MAP.
 
@@ -264,6 +337,10 @@ def calibrate(
         Not supported by ``"nuts"`` (ignored).
     checkpoint_seconds
         Minimum wall time between two snapshots of a chain. [s]
+    observations
+        The outputs' error models (:mod:`bayescal.calibration.noise`: one
+        ``lambda*`` per output, AR(1) errors); default: the paper's one white
+        output with ``assembled.lam_star_prior``. NUTS needs one white output.
 
     Returns
     -------
@@ -294,7 +371,15 @@ def calibrate(
         assembled.lam_star_prior,
         list(prior_map.values()),
         algebra=algebra,
+        observations=observations,
     )
+    if sampler == "nuts" and target.prior_terms.d != target.t + 2:
+        raise ConfigError(
+            "sampler 'nuts' samples one output with white errors; this calibration has "
+            f"{target.prior_terms.n_outputs} output(s) and {target.prior_terms.n_phi} AR(1) "
+            "coefficient(s)",
+            hint="use sampler 'mwg'",
+        )
     starts = default_starts(target, n_chains, seed)
     if sampler == "nuts":
         return _calibrate_nuts(
@@ -307,7 +392,7 @@ def calibrate(
         n_chains=n_chains,
         seed=seed,
         backend=backend,
-        names=(*assembled.parameter_names, *LAMBDA_NAMES),
+        names=(*assembled.parameter_names, *target.aux_names),
         callback=callback,
         checkpoint_dir=checkpoint_dir,
         checkpoint_seconds=checkpoint_seconds,
@@ -319,12 +404,13 @@ def calibrate(
         names=assembled.parameter_names,
         priors=prior_map,
         unit_draws=draws[..., :t],
-        lam=draws[..., t],
-        lam_star=draws[..., t + 1],
         log_density=chains.log_density,
         acceptance=chains.acceptance,
         seed=int(seed),
         algebra=algebra,
+        aux=draws[..., t:],
+        aux_names=target.aux_names,
+        noise=() if observations is None else observations.outputs,
     )
 
 
