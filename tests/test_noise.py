@@ -7,7 +7,7 @@ Two references, independent of the fast algebra:
 * the density of the raw data, ``log p(W_sim, Y*)`` from the full joint Gaussian of
   the simulator weights and every measured sample (``Y* = K W* + e``, ``e`` white
   or AR(1)), which checks the whole factorisation of
-  :mod:`bayescal.calibration.noise` (generalised least-squares weights plus the
+  :mod:`bayescal.emulator.noise` (generalised least-squares weights plus the
   remainder), not only the algebra.
 
 Agreement is asked to 1e-10 relative: both sides are exact; what separates them
@@ -24,14 +24,14 @@ from scipy import linalg, stats
 
 from bayescal.calibration.dense import DenseCalibrationDensity
 from bayescal.calibration.kron import KronCalibrationDensity
-from bayescal.calibration.noise import (
+from bayescal.emulator.dense import gaussian_logdensity, grid_inputs
+from bayescal.emulator.kernel import SeparableKernel
+from bayescal.emulator.noise import (
     ObservationModel,
     OutputNoise,
     ar1_whiten,
     noise_prior_from_sd,
 )
-from bayescal.emulator.dense import gaussian_logdensity, grid_inputs
-from bayescal.emulator.kernel import SeparableKernel
 from bayescal.errors import ConfigError
 
 REL = 1e-10

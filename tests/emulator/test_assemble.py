@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from bayescal.emulator.assemble import assemble, runs_to_columns
+from bayescal.emulator.noise import DEFAULT_NOISE_PRIOR
 from bayescal.errors import DataError
 from virtual_wall import PER_DAY, VirtualExperiment, virtual_experiment
 
@@ -53,14 +54,20 @@ def test_weights_and_lambda_priors_match_least_squares(small: VirtualExperiment)
     )
     assert a.basis.p == 2
     k = a.basis.k
-    for y, w, prior in ((a.y_std, a.w, a.lam_prior), (a.y_star_std, a.w_star, a.lam_star_prior)):
+    # lambda: the paper's Gamma(5, 5) updated by eq. 7; lambda*: the weak default
+    # (a sensor accuracy the study does not state must not dominate the data).
+    cases = (
+        (a.y_std, a.w, a.lam_prior, (5.0, 5.0)),
+        (a.y_star_std, a.w_star, a.lam_star_prior, DEFAULT_NOISE_PRIOR),
+    )
+    for y, w, prior, (shape, rate) in cases:
         ref, *_ = np.linalg.lstsq(k, y, rcond=None)
         # Two independent least-squares solvers on a well-conditioned 2-column K.
         np.testing.assert_allclose(w, ref.T, rtol=1e-9, atol=1e-11)
         resid = y - k @ ref
         n, m = y.shape
-        assert prior[0] == pytest.approx(5.0 + 0.5 * m * (n - 2), rel=1e-15)
-        assert prior[1] == pytest.approx(5.0 + 0.5 * float(np.sum(resid**2)), rel=1e-9)
+        assert prior[0] == pytest.approx(shape + 0.5 * m * (n - 2), rel=1e-15)
+        assert prior[1] == pytest.approx(rate + 0.5 * float(np.sum(resid**2)), rel=1e-9)
 
 
 def test_variance_fraction_picks_the_fewest_components(small: VirtualExperiment) -> None:

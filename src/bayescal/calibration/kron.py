@@ -135,7 +135,7 @@ def _grouped_bases(
     The observed block of the ``q`` bases (rows basis-major: basis ``j``,
     period ``i``) is ``blockdiag_j(tau_j^-1 S_x,j[O, O]) + noise ⊗ I_m_obs``: the
     GP is independent between bases, the noise of a period's weights is not
-    (AR(1) errors, :mod:`bayescal.calibration.noise`). Each basis's simulator
+    (AR(1) errors, :mod:`bayescal.emulator.noise`). Each basis's simulator
     block stays Kronecker; the ``(q m_obs)``-row Schur complement is factorised.
     """
     logdet = quad = 0.0

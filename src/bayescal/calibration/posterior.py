@@ -36,7 +36,6 @@ from numpy.typing import ArrayLike
 
 from bayescal.calibration.hmc import sample_nuts_isolated
 from bayescal.calibration.kron import Kind
-from bayescal.calibration.noise import ObservationModel, OutputNoise
 from bayescal.calibration.target import (
     LAMBDA_NAMES,
     CalibrationPosterior,
@@ -48,6 +47,7 @@ from bayescal.design import Prior
 from bayescal.emulator.assemble import Assembled
 from bayescal.emulator.gp import Emulator
 from bayescal.emulator.kernel import FloatArray
+from bayescal.emulator.noise import ObservationModel, OutputNoise
 from bayescal.errors import ConfigError
 from bayescal.mcmc.chains import BACKENDS, ChainBackend
 from bayescal.mcmc.diagnostics import Diagnostics, diagnose, import_arviz
@@ -91,7 +91,7 @@ class Posterior:
     diagnostics
         R-hat, ESS, MCSE and the list of warnings (over theta* and ``aux``).
     noise
-        The outputs' error models (:class:`~bayescal.calibration.noise.OutputNoise`),
+        The outputs' error models (:class:`~bayescal.emulator.noise.OutputNoise`),
         for the noise in physical units; empty where unknown.
     """
 
@@ -338,7 +338,7 @@ def calibrate(
     checkpoint_seconds
         Minimum wall time between two snapshots of a chain. [s]
     observations
-        The outputs' error models (:mod:`bayescal.calibration.noise`: one
+        The outputs' error models (:mod:`bayescal.emulator.noise`: one
         ``lambda*`` per output, AR(1) errors); default: the paper's one white
         output with ``assembled.lam_star_prior``. NUTS needs one white output.
 

@@ -25,8 +25,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy import special
 
-from bayescal.calibration.noise import PHI_MAX
 from bayescal.design import BetaPrior, Prior, UniformPrior, log_gamma
+from bayescal.emulator.noise import PHI_MAX
 from bayescal.errors import ConfigError
 
 __all__ = ["CalibrationPriors", "ThetaPriors", "log_gamma_array"]
@@ -80,7 +80,7 @@ class CalibrationPriors:
 
     ``O`` is the number of calibrated outputs (one observation precision each),
     ``A`` the number with AR(1) errors (one coefficient each, uniform on
-    ``(-PHI_MAX, PHI_MAX)``; :mod:`bayescal.calibration.noise`). One white output
+    ``(-PHI_MAX, PHI_MAX)``; :mod:`bayescal.emulator.noise`). One white output
     gives the paper's ``[u, lambda, lambda*]``.
 
     Parameters

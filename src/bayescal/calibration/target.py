@@ -30,12 +30,12 @@ from numpy.typing import ArrayLike, NDArray
 from bayescal.calibration.batch import BatchSession
 from bayescal.calibration.grid import StackedGrid
 from bayescal.calibration.kron import CalibrationAlgebra, Kind, make_algebra
-from bayescal.calibration.noise import PHI_MAX, GlsPieces, ObservationModel
 from bayescal.calibration.priors import CalibrationPriors
 from bayescal.design import Prior
 from bayescal.emulator.gp import Emulator
 from bayescal.emulator.kernel import FloatArray
 from bayescal.emulator.kron import Lru
+from bayescal.emulator.noise import PHI_MAX, GlsPieces, ObservationModel
 from bayescal.errors import ConfigError
 from bayescal.mcmc.chains import ChainBackend, Chains, dispersed_starts, run_chains
 from bayescal.mcmc.samplers.lockstep import LockstepTarget, RowLoop, Stateless
@@ -61,9 +61,9 @@ class CalibrationPosterior:
 
     With one white output (``observations`` omitted, or one white output) the
     vector is the paper's ``[u, lambda, lambda*]``. With an
-    :class:`~bayescal.calibration.noise.ObservationModel` it holds one
+    :class:`~bayescal.emulator.noise.ObservationModel` it holds one
     ``lambda*`` per output and one AR(1) coefficient ``phi`` per output with
-    AR(1) errors (:mod:`bayescal.calibration.noise`).
+    AR(1) errors (:mod:`bayescal.emulator.noise`).
 
     Picklable (for chains in worker processes). Non-positive-definite
     covariances count as zero density. Offers its lockstep form
@@ -185,7 +185,7 @@ class CalibrationPosterior:
         return prior + lik
 
     def _likelihood(self, arr: FloatArray) -> float:
-        """Several outputs, or AR(1) errors (:mod:`bayescal.calibration.noise`)."""
+        """Several outputs, or AR(1) errors (:mod:`bayescal.emulator.noise`)."""
         obs = self.observations
         assert obs is not None  # only called with an observation model
         t, n_out = self.t, obs.n_outputs
@@ -345,7 +345,7 @@ def build_target(
     algebra
         ``"kronecker"`` (fast, default) or ``"dense"`` (reference).
     observations
-        The outputs' error models (:mod:`bayescal.calibration.noise`); default:
+        The outputs' error models (:mod:`bayescal.emulator.noise`); default:
         one white output with ``lam_star_prior``.
     """
     if len(priors) != len(emulator.parameter_names):
