@@ -47,11 +47,11 @@ from bayescal.config.messages import format_errors
 from bayescal.config.parameters import Parameter
 from bayescal.config.simulators import SimulatorSection
 from bayescal.config.targets import KIND_UNITS, SENSOR_PREFIX, normal_unit, parse_sensor_target
-from bayescal.errors import ConfigError
-from bayescal.glossary import GLOSSARY
+from bayescal.errors import ConfigError, DataError
+from bayescal.glossary import GLOSSARY, glossary_quantity
 from bayescal.mcmc.nuts import NUTS_MIN_WARMUP
 from bayescal.optional import module_installed
-from bayescal.units import same_scale
+from bayescal.units import same_scale, spread_to_internal
 
 if TYPE_CHECKING:
     from bayescal.design import Prior
@@ -100,6 +100,38 @@ class StudySection(Section):
         return resolve_path(value, info, "a folder name")
 
 
+Spread = float | str
+
+
+class OutputError(Section):
+    """``[outputs.errors.<name>]``: the measurement error model of one calibrated output."""
+
+    model: Literal["white", "ar1"] = field_doc(
+        "Errors independent from sample to sample ('white', the paper) or AR(1) within a "
+        "period ('ar1': residuals that drift, coefficient sampled). Choose by cross-validation "
+        "on the training periods (bayescal compare), not by the test window.",
+        "ar1",
+        default="white",
+    )
+    sd: Spread | list[Spread] | None = field_doc(
+        "The sensor's accuracy as one standard deviation, or a range [low, high] taken as "
+        "the central 95 % interval of the noise SD; a number in the output's unit or text "
+        "with a unit ('0.1 W/m2', '0.2 K'). It becomes the prior of the output's observation "
+        "precision (centred on it, or spanning the range). Without it, a weak prior lets the "
+        "data decide.",
+        "0.1 W/m2",
+        ["0.05 W/m2", "0.3 W/m2"],
+        default=None,
+    )
+
+    @field_validator("sd")
+    @classmethod
+    def _sd_shape(cls, value: Any) -> Any:
+        if isinstance(value, list) and len(value) != 2:
+            raise ValueError(f"give one sd or a range [low, high], got {len(value)} values")
+        return value
+
+
 class OutputsSection(Section):
     """``[outputs]``: the measured outputs to calibrate on."""
 
@@ -109,6 +141,47 @@ class OutputsSection(Section):
         ["heat_flux_in"],
         min_length=1,
     )
+    errors: dict[str, OutputError] = field_doc(
+        "Measurement error model per calibrated output (default: white errors, weak prior).",
+        {"heat_flux_in": {"model": "ar1", "sd": "0.1 W/m2"}},
+        default_factory=dict,
+    )
+
+    def noise_sd(self, name: str) -> float | tuple[float, float] | None:
+        """The stated accuracy of output ``name`` in its internal unit (``None`` if not given).
+
+        Raises
+        ------
+        bayescal.errors.ConfigError
+            For text that is not "<number> <unit>" with a unit of the output's dimension.
+        """
+        spec = self.errors.get(name)
+        if spec is None or spec.sd is None:
+            return None
+        values = spec.sd if isinstance(spec.sd, list) else [spec.sd]
+        out = [_spread(v, name) for v in values]
+        return out[0] if len(out) == 1 else (out[0], out[1])
+
+
+def _spread(value: Spread, name: str) -> float:
+    """One noise SD in the internal unit of output ``name``."""
+    if not isinstance(value, str):
+        return float(value)
+    parts = value.split(maxsplit=1)
+    quantity = glossary_quantity(name)
+    try:
+        number = float(parts[0])
+        if len(parts) == 1:
+            return number
+        if quantity is None:
+            raise DataError(f"{name!r} is not a glossary name, its unit is unknown")
+        return spread_to_internal(number, parts[1].strip(), quantity.dimension)
+    except (ValueError, DataError) as exc:
+        detail = exc.one_line() if isinstance(exc, DataError) else "not a number"
+        raise ConfigError(
+            f"outputs.errors.{name}.sd: {value!r} is not '<number> <unit>' ({detail})",
+            hint="write e.g. sd = '0.1 W/m2' or a plain number in the output's unit",
+        ) from None
 
 
 def _length(value: object) -> object:
@@ -206,6 +279,14 @@ class EmulatorSection(Section):
     samples: int = field_doc("Hyperparameter MCMC sweeps kept per chain.", 1000, default=1000, ge=1)
     algebra: Literal["kronecker", "dense"] = field_doc(
         "Linear algebra: fast Kronecker or the dense reference.", "dense", default="kronecker"
+    )
+    standardise: Literal["output", "pointwise"] = field_doc(
+        "Scale of each output before the PCA: one number per output ('output': a sensor's "
+        "noise keeps one size, so its SD is stated in the output's unit) or each sample's SD "
+        "over the design runs ('pointwise', the paper: the implied noise then varies with the "
+        "time of day). Both centre every sample on its mean over the runs.",
+        "pointwise",
+        default="output",
     )
 
     @model_validator(mode="after")
@@ -500,6 +581,25 @@ def _output_problems(study: Study) -> list[str]:
             )
         elif name in study.outputs.calibrate:
             problems.append(f"outputs.calibrate: {name!r} is an input of the {sim} simulator")
+    for name in study.outputs.errors:
+        if name not in study.outputs.calibrate:
+            problems.append(
+                f"outputs.errors.{name}: {name!r} is not a calibrated output "
+                f"(outputs.calibrate: {', '.join(study.outputs.calibrate)})"
+            )
+            continue
+        try:
+            study.outputs.noise_sd(name)
+        except ConfigError as exc:
+            problems.append(str(exc.message))
+    if study.calibration.sampler == "nuts" and (
+        len(study.outputs.calibrate) > 1
+        or any(e.model != "white" for e in study.outputs.errors.values())
+    ):
+        problems.append(
+            "calibration.sampler: 'nuts' samples one output with white errors; use 'mwg' "
+            "for several outputs or AR(1) errors"
+        )
     return problems
 
 

@@ -30,7 +30,7 @@ from bayescal.calibration.posterior import Posterior, calibrate
 from bayescal.config import Study, build_simulator, nominal_parameters
 from bayescal.data.measured import MeasuredData, load_measured
 from bayescal.design import Design, Prior, latin_hypercube
-from bayescal.emulator.assemble import Assembled, assemble
+from bayescal.emulator.assemble import Assembled, NoiseSpec, assemble
 from bayescal.emulator.gp import Emulator, LooResult
 from bayescal.emulator.training import train
 from bayescal.errors import SimulatorError
@@ -213,6 +213,14 @@ def assemble_runs(ctx: Context, sims: RunResults) -> Assembled:
     """Cut, standardise and project the successful runs and the measurements."""
     design = Design(sims.design.priors, sims.unit, seed=sims.design.seed)
     section = ctx.study.emulator
+    outputs = ctx.study.outputs
+    noise = {
+        name: NoiseSpec(
+            outputs.errors[name].model if name in outputs.errors else "white",
+            outputs.noise_sd(name),
+        )
+        for name in outputs.calibrate
+    }
     return assemble(
         design,
         sims.outputs,
@@ -224,6 +232,8 @@ def assemble_runs(ctx: Context, sims: RunResults) -> Assembled:
         components=section.pca_components,
         input_variance=section.input_pca_variance,
         history=section.history_periods,
+        scale=section.standardise,
+        noise=noise,
     )
 
 
@@ -284,6 +294,7 @@ def calibrate_stage(
             callback=tick,
             checkpoint_dir=checkpoint_dir,
             checkpoint_seconds=ctx.options.checkpoint_seconds,
+            observations=em.assembled.observations,
         )
     finally:
         close()
