@@ -368,20 +368,20 @@ def predict_stage(
 def posterior_runs(
     ctx: Context, posterior: Posterior, n: int
 ) -> tuple[dict[str, np.ndarray], np.ndarray]:
-    """The simulator at ``n`` posterior draws (thinned evenly): outputs and their lambda*."""
+    """The simulator at ``n`` posterior draws (thinned evenly): outputs and their lambda*s."""
     theta = posterior.draws.reshape(-1, len(posterior.names))
-    lam_star = posterior.lam_star.reshape(-1)
+    lam_stars = posterior.lam_stars.reshape(theta.shape[0], -1)
     pick = np.unique(np.linspace(0, theta.shape[0] - 1, min(n, theta.shape[0])).astype(int))
     design = Design.from_values(ctx.priors, theta[pick])
     res = simulate(ctx, design)
-    return res.outputs, lam_star[pick][res.indices]
+    return res.outputs, lam_stars[pick][res.indices]
 
 
 def _band(
     ctx: Context, em: EmulatorResult, posterior: Posterior, discrepancy: Discrepancy | None
 ) -> Band:
     section = ctx.study.predict
-    seed = ctx.seed("predict")
+    measured = {o: ctx.measured.outputs[o] for o in ctx.study.outputs.calibrate}
     # With method = "simulator" the model part is the simulator re-run at posterior
     # draws (of the Delta phase for the corrected prediction) and Delta is added to
     # it: Delta was estimated against the emulator on the training periods, where
@@ -395,8 +395,8 @@ def _band(
             {o: runs[o] for o in em.emulator.outputs.names},
             lam_star,
             level=section.level,
-            seed=seed,
             discrepancy=discrepancy,
+            measured=measured,
         )
     return predict_band(
         em.emulator,
@@ -404,6 +404,6 @@ def _band(
         posterior,
         draws=section.draws,
         level=section.level,
-        seed=seed,
         discrepancy=discrepancy,
+        measured=measured,
     )
