@@ -309,7 +309,14 @@ def test_pipeline_stage_passes_the_sampler(monkeypatch: pytest.MonkeyPatch) -> N
     raw.setdefault("calibration", {})["sampler"] = "nuts"
     study = study_from_dict(raw, root=FIXTURE)
     seen: dict[str, Any] = {}
-    monkeypatch.setattr(stages, "calibrate", lambda *args, **kw: seen.update(kw))
+    fake = SimpleNamespace(with_derived=lambda derived: derived)
+
+    def record(*args: Any, **kw: Any) -> SimpleNamespace:
+        seen.update(kw)
+        return fake
+
+    monkeypatch.setattr(stages, "calibrate", record)
+    monkeypatch.setattr(stages, "derived_draws", lambda ctx, post: {})
     ctx = SimpleNamespace(study=study, options=stages.Options(), seed=lambda *args: 0)
     em = SimpleNamespace(emulator=None, assembled=SimpleNamespace(observations=None))
     stages.calibrate_stage(ctx, em)  # type: ignore[arg-type]

@@ -225,3 +225,30 @@ def test_noise_prior_from_a_sensor_accuracy() -> None:
     for bad in (0.0, -1.0, [0.3, 0.05], [0.1, 0.2, 0.3], float("nan")):
         with pytest.raises(ConfigError, match="noise sd"):
             noise_prior_from_sd(bad, scale=1.0)  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_discrepancy_variance_agrees_with_the_dense_covariance(seed: int) -> None:
+    # delta_j c_x(x, x') more covariance on the observed weights: a model discrepancy
+    # GP over the periods' conditions. Every Kronecker route against the dense one.
+    rng, kernels, theta, x = _problem(seed)
+    p = len(kernels)
+    w = rng.normal(size=(theta.shape[0] * x.shape[0], p))
+    w_star = rng.normal(size=(x.shape[0], p))
+    a, a_star = rng.uniform(0.01, 0.1, p), rng.uniform(0.01, 0.2, p)
+    delta = rng.uniform(0.0, 0.5, p)
+    ts = rng.random(theta.shape[1])
+    kron = KronCalibrationDensity(theta, x, kernels, np.ones(p), w, w_star)
+    dense = DenseCalibrationDensity(theta, x, kernels, np.ones(p), w, w_star)
+    ref = dense.pieces_nuggets(ts, a, a_star, delta).logpdf
+    assert kron.pieces_nuggets(ts, a, a_star, delta).logpdf == pytest.approx(ref, rel=REL)
+    per_period = np.repeat(a_star[:, None], x.shape[0], axis=1)  # the general Schur route
+    assert kron.pieces_nuggets(ts, a, per_period, delta).logpdf == pytest.approx(ref, rel=REL)
+    assert kron.pieces_grouped(ts, a, a_star, [], delta).logpdf == pytest.approx(ref, rel=REL)
+    half = rng.normal(size=(2, 2))
+    groups = [((0, 2), half @ half.T * 0.05 + np.eye(2) * 0.01)]
+    assert kron.pieces_grouped(ts, a, a_star, groups, delta).logpdf == pytest.approx(
+        dense.pieces_grouped(ts, a, a_star, groups, delta).logpdf, rel=REL
+    )
+    # The discrepancy changes the density (the test can fail).
+    assert kron.pieces_nuggets(ts, a, a_star).logpdf != pytest.approx(ref, rel=1e-6)

@@ -59,7 +59,13 @@ class DenseCalibrationDensity:
         d = self._data
         return type(self)(d.theta, d.x, d.kernels, d.ktk, d.w, w_star, d.obs_index)
 
-    def pieces_nuggets(self, theta_star: ArrayLike, a: ArrayLike, a_star: ArrayLike) -> LogDensity:
+    def pieces_nuggets(
+        self,
+        theta_star: ArrayLike,
+        a: ArrayLike,
+        a_star: ArrayLike,
+        delta: ArrayLike | None = None,
+    ) -> LogDensity:
         """Log-density summed over bases for explicit nuggets.
 
         Parameters
@@ -70,6 +76,8 @@ class DenseCalibrationDensity:
             Simulator nuggets, shape ``(p,)``. [-]
         a_star
             Observation nuggets, shape ``(p,)`` or ``(p, m_obs)``. [-]
+        delta
+            Model-discrepancy variance per basis ``(p,)`` or ``None``. [-]
         """
         d = self._data
         if d.w_star is None:
@@ -77,6 +85,11 @@ class DenseCalibrationDensity:
         ts = np.asarray(theta_star, dtype=float).reshape(-1)
         a_arr = np.broadcast_to(np.asarray(a, dtype=float), (d.n_bases,))
         as_arr = broadcast_obs_nuggets(a_star, d.n_bases, d.obs_index.size)
+        dl = (
+            np.zeros(d.n_bases)
+            if delta is None
+            else np.broadcast_to(np.asarray(delta, float), (d.n_bases,))
+        )
         total = LogDensity.zero()
         for j, kern in enumerate(d.kernels):
             v = np.concatenate([d.w[:, j], d.w_star[:, j]])
@@ -89,6 +102,7 @@ class DenseCalibrationDensity:
                 theta_star=ts,
                 obs_index=d.obs_index,
                 a_star=as_arr[j],
+                delta=float(dl[j]),
             )
         return total
 
@@ -103,6 +117,7 @@ class DenseCalibrationDensity:
         a: ArrayLike,
         a_star: ArrayLike,
         groups: Sequence[tuple[Sequence[int], FloatArray]],
+        delta: ArrayLike | None = None,
     ) -> LogDensity:
         """Log-density with coupled observation noise within groups of bases (dense).
 
@@ -123,6 +138,11 @@ class DenseCalibrationDensity:
         cov = np.zeros((d.n_bases * block, d.n_bases * block))
         vec = np.empty(d.n_bases * block)
         grouped = {j for members, _ in groups for j in members}
+        dl = (
+            np.zeros(d.n_bases)
+            if delta is None
+            else np.broadcast_to(np.asarray(delta, float), (d.n_bases,))
+        )
         for j, kern in enumerate(d.kernels):
             rows = slice(j * block, (j + 1) * block)
             nugget = 0.0 if j in grouped else float(as_arr[j])
@@ -134,6 +154,7 @@ class DenseCalibrationDensity:
                 theta_star=ts,
                 obs_index=d.obs_index,
                 a_star=nugget,
+                delta=float(dl[j]),
             )
             vec[rows] = np.concatenate([d.w[:, j], d.w_star[:, j]])
         period = np.arange(m_obs)

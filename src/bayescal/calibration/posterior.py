@@ -28,7 +28,7 @@ from __future__ import annotations
 import dataclasses
 import os
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Literal
 
 import numpy as np
@@ -57,9 +57,28 @@ if TYPE_CHECKING:
     import pandas as pd
     from arviz import InferenceData
 
-__all__ = ["LAMBDA_NAMES", "CalibrationPosterior", "Posterior", "calibrate"]
+__all__ = ["LAMBDA_NAMES", "CalibrationPosterior", "Derived", "Posterior", "calibrate"]
 
 SamplerKind = Literal["mwg", "nuts"]
+
+
+@dataclass(frozen=True)
+class Derived:
+    """Draws of a quantity computed from theta* (the wall's U-value, a user's expression).
+
+    Attributes
+    ----------
+    draws
+        ``(chains, draws)``, in ``unit``.
+    unit
+        Its unit.
+    description
+        What it is.
+    """
+
+    draws: FloatArray
+    unit: str = ""
+    description: str = ""
 
 
 @dataclass(frozen=True)
@@ -93,6 +112,8 @@ class Posterior:
     noise
         The outputs' error models (:class:`~bayescal.emulator.noise.OutputNoise`),
         for the noise in physical units; empty where unknown.
+    derived
+        Quantities computed from theta* at every draw (:meth:`with_derived`).
     """
 
     names: tuple[str, ...]
@@ -106,6 +127,7 @@ class Posterior:
     algebra: str
     diagnostics: Diagnostics
     noise: tuple[OutputNoise, ...] = ()
+    derived: Mapping[str, Derived] = field(default_factory=dict)
 
     @classmethod
     def build(
@@ -186,7 +208,8 @@ class Posterior:
     def phi(self) -> FloatArray:
         """AR(1) coefficients of the outputs with AR(1) errors ``(chains, draws, A)``."""
         n_out = max(1, len(self.noise))
-        return self.aux[..., 1 + n_out :]
+        n_phi = sum(o.model == "ar1" for o in self.noise)
+        return self.aux[..., 1 + n_out : 1 + n_out + n_phi]
 
     @property
     def draws(self) -> FloatArray:
@@ -216,6 +239,13 @@ class Posterior:
         """
         return {o.name: o.scale / np.sqrt(self.lam_stars[..., q]) for q, o in enumerate(self.noise)}
 
+    def with_derived(self, derived: Mapping[str, Derived]) -> Posterior:
+        """The same posterior with derived quantities attached (names must be new)."""
+        clash = sorted(set(derived) & {*self.all_names, *self.derived})
+        if clash:
+            raise ConfigError(f"derived quantities {clash} clash with names already in use")
+        return dataclasses.replace(self, derived={**self.derived, **derived})
+
     def interval(self, level: float = 0.95) -> tuple[FloatArray, FloatArray]:
         """Central credible interval of theta* per parameter (physical units), ``(t,)`` each."""
         flat = self.draws.reshape(-1, len(self.names))
@@ -236,14 +266,17 @@ class Posterior:
         table = pd.DataFrame(self.diagnostics.table())
         table["lower"] = np.percentile(flat, tail, axis=0)
         table["upper"] = np.percentile(flat, 100.0 - tail, axis=0)
-        sds = self.noise_sd()
-        if sds:
-            names = ["noise_sd" if len(sds) == 1 else f"noise_sd_{n}" for n in sds]
-            stacked = np.stack(list(sds.values()), axis=-1)
-            extra = pd.DataFrame(diagnose(stacked, names).table())
-            flat_sd = stacked.reshape(-1, len(names))
-            extra["lower"] = np.percentile(flat_sd, tail, axis=0)
-            extra["upper"] = np.percentile(flat_sd, 100.0 - tail, axis=0)
+        extras = {
+            ("noise_sd" if len(self.noise) == 1 else f"noise_sd_{n}"): sd
+            for n, sd in self.noise_sd().items()
+        }
+        extras |= {name: d.draws for name, d in self.derived.items()}
+        if extras:
+            stacked = np.stack(list(extras.values()), axis=-1)
+            extra = pd.DataFrame(diagnose(stacked, list(extras)).table())
+            flat_extra = stacked.reshape(-1, len(extras))
+            extra["lower"] = np.percentile(flat_extra, tail, axis=0)
+            extra["upper"] = np.percentile(flat_extra, 100.0 - tail, axis=0)
             table = pd.concat([table, extra])
         return table
 
@@ -373,7 +406,7 @@ def calibrate(
         algebra=algebra,
         observations=observations,
     )
-    if sampler == "nuts" and target.prior_terms.d != target.t + 2:
+    if sampler == "nuts" and not target.plain:
         raise ConfigError(
             "sampler 'nuts' samples one output with white errors; this calibration has "
             f"{target.prior_terms.n_outputs} output(s) and {target.prior_terms.n_phi} AR(1) "

@@ -26,7 +26,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy import special
 
 from bayescal.design import BetaPrior, Prior, UniformPrior, log_gamma
-from bayescal.emulator.noise import PHI_MAX
+from bayescal.emulator.noise import DELTA_RANGE, PHI_MAX
 from bayescal.errors import ConfigError
 
 __all__ = ["CalibrationPriors", "ThetaPriors", "log_gamma_array"]
@@ -93,12 +93,16 @@ class CalibrationPriors:
         ``(shape, rate)`` of the Gamma prior of ``lambda*``, or one such pair per output.
     n_phi
         Number of AR(1) coefficients ``A``.
+    n_delta
+        Number of model-discrepancy relative variances ``D`` (after the ``phi``;
+        log-uniform on :data:`~bayescal.emulator.noise.DELTA_RANGE`).
     """
 
     theta: tuple[Prior, ...]
     lam: tuple[float, float]
     lam_star: Any
     n_phi: int = 0
+    n_delta: int = 0
     lam_stars: tuple[tuple[float, float], ...] = field(init=False, repr=False, compare=False)
     theta_priors: ThetaPriors = field(init=False, repr=False, compare=False)
     uniform: tuple[int, ...] = field(init=False, repr=False, compare=False)
@@ -137,8 +141,8 @@ class CalibrationPriors:
 
     @property
     def d(self) -> int:
-        """Length of the sampled vector ``t + 1 + O + A``."""
-        return self.t + 1 + self.n_outputs + self.n_phi
+        """Length of the sampled vector ``t + 1 + O + A + D``."""
+        return self.t + 1 + self.n_outputs + self.n_phi + self.n_delta
 
     # ------------------------------------------------------------ one point
 
@@ -149,10 +153,16 @@ class CalibrationPriors:
         total = log_gamma(float(arr[t]), *self.lam)
         for q, pair in enumerate(self.lam_stars):
             total += log_gamma(float(arr[t + 1 + q]), *pair)
+        start = t + 1 + self.n_outputs
         if self.n_phi:
-            phi = arr[t + 1 + self.n_outputs :]
+            phi = arr[start : start + self.n_phi]
             if not np.all(np.abs(phi) < PHI_MAX):
                 return -_INF
+        if self.n_delta:
+            rel = arr[start + self.n_phi :]
+            if not np.all((rel >= DELTA_RANGE[0]) & (rel <= DELTA_RANGE[1])):
+                return -_INF
+            total -= float(np.sum(np.log(rel)))
         return self.theta_priors.scalar(arr, total)
 
     # ------------------------------------------------------------ B points
@@ -160,6 +170,9 @@ class CalibrationPriors:
     def term(self, column: FloatArray, k: int) -> FloatArray:
         """Log prior of coordinate ``k`` at the values ``column`` ``(B,)``."""
         t = self.t
+        if k >= t + 1 + self.n_outputs + self.n_phi:
+            inside = (column >= DELTA_RANGE[0]) & (column <= DELTA_RANGE[1])
+            return np.where(inside, -np.log(np.where(inside, column, 1.0)), -_INF)
         if k >= t + 1 + self.n_outputs:
             return np.where(np.abs(column) < PHI_MAX, 0.0, -_INF)
         if k >= t:
@@ -186,8 +199,10 @@ class CalibrationPriors:
             for q in range(1, n_prec):
                 total += log_gamma_array(prec[:, q], float(self.shape_m1[q]), float(self.rate[q]))
         if self.n_phi:
-            inside = (np.abs(points[:, t + n_prec :]) < PHI_MAX).all(axis=1)
-            total = np.where(inside, total, -_INF)
+            phi = points[:, t + n_prec : t + n_prec + self.n_phi]
+            total = np.where((np.abs(phi) < PHI_MAX).all(axis=1), total, -_INF)
+        for k in range(t + n_prec + self.n_phi, self.d):
+            total = total + self.term(points[:, k], k)
         if self.uniform:
             u = points[:, list(self.uniform)]
             inside = ((u >= 0.0) & (u <= 1.0)).all(axis=1)

@@ -35,7 +35,7 @@ from bayescal.design import Prior
 from bayescal.emulator.gp import Emulator
 from bayescal.emulator.kernel import FloatArray
 from bayescal.emulator.kron import Lru
-from bayescal.emulator.noise import PHI_MAX, GlsPieces, ObservationModel
+from bayescal.emulator.noise import DELTA_RANGE, PHI_MAX, GlsPieces, ObservationModel
 from bayescal.errors import ConfigError
 from bayescal.mcmc.chains import ChainBackend, Chains, dispersed_starts, run_chains
 from bayescal.mcmc.samplers.lockstep import LockstepTarget, RowLoop, Stateless
@@ -106,7 +106,8 @@ class CalibrationPosterior:
                 for q, o in enumerate(observations.outputs)
             )
         n_phi = 0 if observations is None else len(observations.ar_outputs)
-        self.prior_terms = CalibrationPriors(tuple(priors), lam_prior, stars, n_phi)
+        n_delta = 0 if observations is None else len(observations.delta_outputs)
+        self.prior_terms = CalibrationPriors(tuple(priors), lam_prior, stars, n_phi, n_delta)
         self.t = self.prior_terms.t
         self._reset()
 
@@ -154,6 +155,11 @@ class CalibrationPosterior:
         """Whether an output has AR(1) errors (its weights' noise coupled, ``phi`` sampled)."""
         return self.observations is not None and self.observations.coupled
 
+    @property
+    def plain(self) -> bool:
+        """One white output without a discrepancy: the paper's ``[u, lambda, lambda*]``."""
+        return self.prior_terms.d == self.t + 2
+
     def grid(self) -> StackedGrid:
         """The fixed arrays of eq. 16 (the JAX route needs the Kronecker back end)."""
         grid = self.algebra.stacked_grid()
@@ -174,9 +180,9 @@ class CalibrationPosterior:
         prior = self.log_prior(arr)
         if prior == -math.inf:
             return prior
-        t, n_out = self.t, self.prior_terms.n_outputs
+        t = self.t
         try:
-            if n_out == 1 and not self.coupled:
+            if self.plain:
                 lik = self.algebra.logpdf(arr[:t], float(arr[t]), float(arr[t + 1]))
             else:
                 lik = self._likelihood(arr)
@@ -188,22 +194,35 @@ class CalibrationPosterior:
         """Several outputs, or AR(1) errors (:mod:`bayescal.emulator.noise`)."""
         obs = self.observations
         assert obs is not None  # only called with an observation model
-        t, n_out = self.t, obs.n_outputs
+        t, n_out, n_phi = self.t, obs.n_outputs, self.prior_terms.n_phi
         lam_star = arr[t + 1 : t + 1 + n_out]
         a = 1.0 / (float(arr[t]) * self.algebra.data.ktk)
         a_star = obs.white_nuggets(lam_star)
+        delta = self._delta(arr[t + 1 + n_out + n_phi :])
         if not self.coupled:
-            return self.algebra.pieces_nuggets(arr[:t], a, a_star).logpdf
-        phi = arr[t + 1 + n_out :]
+            return self.algebra.pieces_nuggets(arr[:t], a, a_star, delta).logpdf
+        phi = arr[t + 1 + n_out : t + 1 + n_out + n_phi]
         algebra, pieces = self._observed_memo.get(phi.tobytes(), lambda: self._observed(phi))
         groups = [
             (obs.outputs[q].bases, piece.h0_inv / float(lam_star[q]))
             for q, piece in zip(obs.ar_outputs, pieces, strict=True)
         ]
-        total = algebra.pieces_grouped(arr[:t], a, a_star, groups).logpdf
+        total = algebra.pieces_grouped(arr[:t], a, a_star, groups, delta).logpdf
         for q, piece in zip(obs.ar_outputs, pieces, strict=True):
             total += obs.remainder(q, piece, float(lam_star[q]))
         return total
+
+    def _delta(self, rel: FloatArray) -> FloatArray | None:
+        """Per-basis discrepancy variances ``r_o tau_j^-1`` from the outputs' ``r``."""
+        obs = self.observations
+        if obs is None or not obs.delta_outputs:
+            return None
+        variances = np.array([k.variance for k in self.algebra.data.kernels])
+        out = np.zeros(variances.size)
+        for q, r in zip(obs.delta_outputs, rel, strict=True):
+            bases = list(obs.outputs[q].bases)
+            out[bases] = float(r) * variances[bases]
+        return out
 
     def _observed(self, phi: FloatArray) -> tuple[CalibrationAlgebra, list[GlsPieces]]:
         """The algebra with the AR(1) outputs' GLS weights at ``phi``, and their pieces."""
@@ -223,7 +242,7 @@ class CalibrationPosterior:
         The batched likelihood (:class:`BatchedPosterior`) for one white
         output; otherwise the rows are evaluated one by one.
         """
-        if self.prior_terms.n_outputs == 1 and not self.coupled:
+        if self.plain:
             return BatchedPosterior(self.algebra, self.prior_terms)
         return Stateless(RowLoop(self))
 
@@ -376,12 +395,15 @@ def default_sampler(target: CalibrationPosterior, n_burn: int) -> MetropolisWith
     """Metropolis-within-Gibbs as ``calibrate`` configures it for ``target``."""
     t, terms = target.t, target.prior_terms
     n_prec = 1 + terms.n_outputs
-    lower = [0.0] * (t + n_prec) + [-PHI_MAX] * terms.n_phi
-    upper = [1.0] * t + [math.inf] * n_prec + [PHI_MAX] * terms.n_phi
+    lower = [0.0] * (t + n_prec) + [-PHI_MAX] * terms.n_phi + [DELTA_RANGE[0]] * terms.n_delta
+    upper = (
+        [1.0] * t + [math.inf] * n_prec + [PHI_MAX] * terms.n_phi + [DELTA_RANGE[1]] * terms.n_delta
+    )
     # Logit-scale widths for theta* and phi, ~2.4 prior log-sd for the sharply
     # known precisions (an AR(1) output's lambda* is judged by its white eq. 7 update).
     shapes = [terms.lam[0], *_start_gammas(target)[:, 0]]
-    scales = [0.5] * t + [2.4 / math.sqrt(a) for a in shapes] + [0.5] * terms.n_phi
+    scales = [0.5] * t + [2.4 / math.sqrt(a) for a in shapes]
+    scales += [0.5] * terms.n_phi + [1.0] * terms.n_delta
     # Short batches and a generous cap: the widths of sharply identified
     # parameters must shrink by ~e^3 within a burn-in of a few hundred sweeps.
     return MetropolisWithinGibbs(
@@ -405,6 +427,10 @@ def default_starts(target: CalibrationPosterior, n_chains: int, seed: int) -> Fl
         columns.append(rng.gamma(shape, 1.0 / rate, n_chains))
     if target.prior_terms.n_phi:
         columns.append(rng.uniform(0.0, 0.9, (n_chains, target.prior_terms.n_phi)))
+    if target.prior_terms.n_delta:
+        low, high = np.log(DELTA_RANGE[0]), np.log(DELTA_RANGE[1])
+        span = rng.uniform(0.1, 0.6, (n_chains, target.prior_terms.n_delta))
+        columns.append(np.exp(low + span * (high - low)))
     return np.column_stack(columns)
 
 

@@ -14,6 +14,8 @@ from __future__ import annotations
 from collections.abc import Callable, Mapping
 from typing import TYPE_CHECKING, Any
 
+import numpy as np
+
 from bayescal.metrics import KEY_COLUMNS, Metrics, metric_columns
 from bayescal.runner import Progress
 
@@ -103,6 +105,23 @@ def describe(res: Results) -> str:
     if res.posterior is not None:
         table = res.posterior.summary()
         lines += ["", "posterior (physical units):", table.to_string(float_format="{:.5g}".format)]
+        sds = res.posterior.noise_sd()
+        for o in res.posterior.noise:
+            sd = sds[o.name].reshape(-1)
+            low, high = np.percentile(sd, [2.5, 97.5])
+            lines.append(
+                f"measurement noise of {o.name} ({o.model}): SD {np.mean(sd):.4g} {o.unit} "
+                f"[{low:.4g}, {high:.4g}]"
+            )
+        from bayescal.calibration.identifiability import identifiability
+
+        ident = identifiability(res.posterior)
+        lines += ["", "what the data fix (principal directions of the posterior vs the prior):"]
+        lines += [f"  {line}" for line in ident.lines()]
+        contraction = ", ".join(
+            f"{n} {100 * c:.0f} %" for n, c in zip(ident.names, ident.contraction, strict=True)
+        )
+        lines.append(f"  prior-to-posterior contraction: {contraction}")
         if res.posterior.warnings:
             lines += ["", "diagnostics: NOT all passed"]
             lines += [f"  warning: {w}" for w in res.posterior.warnings]

@@ -44,10 +44,11 @@ from bayescal.config.base import (
 )
 from bayescal.config.data import DataSection
 from bayescal.config.messages import format_errors
-from bayescal.config.parameters import Parameter
+from bayescal.config.parameters import DerivedSpec, Parameter
 from bayescal.config.simulators import SimulatorSection
 from bayescal.config.targets import KIND_UNITS, SENSOR_PREFIX, normal_unit, parse_sensor_target
 from bayescal.errors import ConfigError, DataError
+from bayescal.expressions import Expression
 from bayescal.glossary import GLOSSARY, glossary_quantity
 from bayescal.mcmc.nuts import NUTS_MIN_WARMUP
 from bayescal.optional import module_installed
@@ -122,6 +123,16 @@ class OutputError(Section):
         "0.1 W/m2",
         ["0.05 W/m2", "0.3 W/m2"],
         default=None,
+    )
+
+    discrepancy: bool = field_doc(
+        "Add a model discrepancy to this output inside the calibration's likelihood: a "
+        "Gaussian process over the periods' conditions x with the emulator's correlation "
+        "and a sampled variance (log-uniform prior from 1e-4 to 1 of the emulator's). "
+        "Systematic misfit then widens the parameters' intervals instead of biasing "
+        "them with false confidence.",
+        True,
+        default=False,
     )
 
     @field_validator("sd")
@@ -420,6 +431,12 @@ class Study(Section):
     )
     predict: PredictSection = field_doc("Predictions with bands.", default_factory=PredictSection)
     runner: RunnerSection = field_doc("Simulation runner.", default_factory=RunnerSection)
+    derived: dict[str, DerivedSpec] = field_doc(
+        "Quantities computed from the parameters at every posterior draw, beside the "
+        "simulator's own (the wall's U-value, resistance and areal heat capacity).",
+        {"R_walls": {"expression": "0.3 / k_brick + 0.08 / k_eps", "unit": "m²·K/W"}},
+        default_factory=dict,
+    )
 
     _root: Path = PrivateAttr(default_factory=Path.cwd)
     _path: Path | None = PrivateAttr(default=None)
@@ -443,6 +460,13 @@ class Study(Section):
         """Parameter name -> prior (:class:`bayescal.design.Prior`), with unit and description."""
         return {name: parameter.to_prior() for name, parameter in self.parameters.items()}
 
+    def expressions(self) -> dict[str, Expression]:
+        """The ``[derived]`` expressions, parsed (names checked against the parameters)."""
+        return {
+            name: Expression.parse(spec.expression, list(self.parameters), f"derived.{name}")
+            for name, spec in self.derived.items()
+        }
+
     @field_validator("parameters")
     @classmethod
     def _parameter_names(cls, value: dict[str, Parameter]) -> dict[str, Parameter]:
@@ -456,6 +480,7 @@ class Study(Section):
     @model_validator(mode="after")
     def _cross_checks(self) -> Study:
         problems = _target_problems(self) + _output_problems(self) + _period_problems(self)
+        problems += _derived_problems(self)
         problems += _sampler_problems(self)
         if self.design.runs < len(self.parameters) + 2:
             problems.append(
@@ -600,6 +625,18 @@ def _output_problems(study: Study) -> list[str]:
             "calibration.sampler: 'nuts' samples one output with white errors; use 'mwg' "
             "for several outputs or AR(1) errors"
         )
+    return problems
+
+
+def _derived_problems(study: Study) -> list[str]:
+    problems = []
+    for name, spec in study.derived.items():
+        if not IDENTIFIER.match(name) or name in study.parameters:
+            problems.append(f"derived.{name}: the name must be an identifier and not a parameter")
+        try:
+            Expression.parse(spec.expression, list(study.parameters), f"derived.{name}")
+        except ConfigError as exc:
+            problems.append(exc.message)
     return problems
 
 

@@ -74,10 +74,14 @@ class NoiseSpec:
         The sensor's accuracy as a standard deviation, or a range ``(low,
         high)``, in the output's unit; ``None``: a weak default prior
         (:data:`~bayescal.emulator.noise.DEFAULT_NOISE_PRIOR`). [unit]
+    discrepancy
+        Whether to add a model discrepancy over the periods' conditions
+        (:class:`~bayescal.emulator.noise.OutputNoise`).
     """
 
     model: ErrorModel = "white"
     sd: float | tuple[float, float] | None = None
+    discrepancy: bool = False
 
 
 @dataclass(frozen=True)

@@ -68,6 +68,9 @@ DEFAULT_NOISE_PRIOR = (0.5, 1e-6)
 
 #: Largest ``|phi|`` of an AR(1) error (the correlation matrix must stay invertible).
 PHI_MAX = 0.999
+#: Range of the relative variance ``r`` of a model discrepancy (log-uniform prior):
+#: from negligible to as large as the emulator's prior variance of a weight.
+DELTA_RANGE = (1e-4, 1.0)
 
 
 def ar1_whiten(y: FloatArray, phi: float) -> FloatArray:
@@ -106,6 +109,11 @@ class OutputNoise:
         Physical units per standardised unit (the output's scale ``s_o``). [unit]
     unit
         The output's unit, for reports.
+    discrepancy
+        Whether the observed weights of this output also carry a model
+        discrepancy ``GP(0, r tau_j^-1 c_x)`` over the periods' conditions, its
+        relative variance ``r`` sampled (Kennedy and O'Hagan's ``delta(x)``
+        inside the likelihood; the paper's difference process is separate).
     """
 
     name: str
@@ -115,6 +123,7 @@ class OutputNoise:
     prior: tuple[float, float] = DEFAULT_NOISE_PRIOR
     scale: float = 1.0
     unit: str = ""
+    discrepancy: bool = False
 
     def __post_init__(self) -> None:
         if self.model not in ("white", "ar1"):
@@ -208,6 +217,11 @@ class ObservationModel:
         """Indices of the outputs with AR(1) errors (one ``phi`` coordinate each)."""
         return tuple(q for q, o in enumerate(self.outputs) if o.model == "ar1")
 
+    @cached_property
+    def delta_outputs(self) -> tuple[int, ...]:
+        """Indices of the outputs with a model discrepancy (one ``r`` coordinate each)."""
+        return tuple(q for q, o in enumerate(self.outputs) if o.discrepancy)
+
     @property
     def coupled(self) -> bool:
         """Whether some output's observed weights are coupled (AR(1) errors)."""
@@ -227,7 +241,11 @@ class ObservationModel:
         single = self.n_outputs == 1
         lam = ["lambda_star" if single else f"lambda_star_{o.name}" for o in self.outputs]
         phi = ["phi" if single else f"phi_{self.outputs[q].name}" for q in self.ar_outputs]
-        return (*lam, *phi)
+        rel = [
+            "delta_rel" if single else f"delta_rel_{self.outputs[q].name}"
+            for q in self.delta_outputs
+        ]
+        return (*lam, *phi, *rel)
 
     # ------------------------------------------------------------ white outputs
 

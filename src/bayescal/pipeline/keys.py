@@ -76,7 +76,12 @@ def stage_keys(ctx: Context) -> dict[str, str]:
     keys["emulator"] = digest(
         "emulator", keys["simulate"], _measured_key(ctx), dump["outputs"], dump["emulator"]
     )
-    keys["calibrate"] = digest("calibrate", keys["emulator"], dump["calibration"])
+    keys["calibrate"] = digest(
+        "calibrate",
+        keys["emulator"],
+        dump["calibration"],
+        *([dump["derived"]] if s.derived else []),
+    )
     keys["discrepancy"] = digest("discrepancy", keys["calibrate"], dump["discrepancy"])
     keys["predict"] = digest(
         "predict",

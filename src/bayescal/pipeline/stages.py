@@ -26,8 +26,9 @@ import numpy as np
 import pandas as pd
 import xarray as xr
 
-from bayescal.calibration.posterior import Posterior, calibrate
+from bayescal.calibration.posterior import Derived, Posterior, calibrate
 from bayescal.config import Study, build_simulator, nominal_parameters
+from bayescal.config.study import OutputError
 from bayescal.data.measured import MeasuredData, load_measured
 from bayescal.design import Design, Prior, latin_hypercube
 from bayescal.emulator.assemble import Assembled, NoiseSpec, assemble
@@ -44,7 +45,7 @@ from bayescal.pipeline.predict import (
     simulator_band,
 )
 from bayescal.runner import Progress, RunResults, run_design
-from bayescal.simulators.base import Simulator
+from bayescal.simulators.base import Derivable, Simulator
 
 if TYPE_CHECKING:
     from bayescal.discrepancy import Discrepancy
@@ -215,11 +216,9 @@ def assemble_runs(ctx: Context, sims: RunResults) -> Assembled:
     section = ctx.study.emulator
     outputs = ctx.study.outputs
     noise = {
-        name: NoiseSpec(
-            outputs.errors[name].model if name in outputs.errors else "white",
-            outputs.noise_sd(name),
-        )
+        name: NoiseSpec(spec.model, outputs.noise_sd(name), spec.discrepancy)
         for name in outputs.calibrate
+        for spec in [outputs.errors.get(name, OutputError())]
     }
     return assemble(
         design,
@@ -280,7 +279,7 @@ def calibrate_stage(
     total = section.chains * (section.burn + section.samples)
     tick, close = _mcmc_tick(ctx, "calibration", total)
     try:
-        return calibrate(
+        post = calibrate(
             em.emulator,
             em.assembled,
             priors,
@@ -298,6 +297,26 @@ def calibrate_stage(
         )
     finally:
         close()
+    return post.with_derived(derived_draws(ctx, post))
+
+
+def derived_draws(ctx: Context, posterior: Posterior) -> dict[str, Derived]:
+    """The simulator's derived quantities and the study's ``[derived]`` at every draw."""
+    draws = posterior.draws
+    names = posterior.names
+    out: dict[str, Derived] = {}
+    sim = ctx.simulator
+    if isinstance(sim, Derivable) and sim.derived_units:
+        flat = draws.reshape(-1, len(names))
+        rows = [sim.derived(dict(zip(names, map(float, row), strict=True))) for row in flat]
+        for quantity, (unit, text) in sim.derived_units.items():
+            column = np.array([r[quantity] for r in rows]).reshape(draws.shape[:2])
+            out[quantity] = Derived(column, unit, text)
+    by_name = {n: draws[..., k] for k, n in enumerate(names)}
+    for quantity, expression in ctx.study.expressions().items():
+        spec = ctx.study.derived[quantity]
+        out[quantity] = Derived(expression.evaluate(by_name), spec.unit, spec.description)
+    return out
 
 
 def discrepancy_stage(ctx: Context, em: EmulatorResult, posterior: Posterior) -> Discrepancy | None:

@@ -36,6 +36,7 @@ from bayescal.emulator.gp import Emulator, LooResult
 from bayescal.glossary import GLOSSARY
 from bayescal.metrics import MODELS, MetricColumn, metric_columns
 from bayescal.report import figures as fg
+from bayescal.report.uncertainty import uncertainty_figures, uncertainty_section
 from bayescal.runner import RunFailure
 
 __all__ = ["SECTIONS", "ReportInputs", "write_draws_csv", "write_figures", "write_report"]
@@ -44,6 +45,7 @@ __all__ = ["SECTIONS", "ReportInputs", "write_draws_csv", "write_figures", "writ
 SECTIONS = (
     "Summary",
     "Calibration parameters",
+    "Uncertainty",
     "Fit metrics",
     "Emulator",
     "Discrepancy",
@@ -234,6 +236,13 @@ def _posterior_figures(inputs: ReportInputs, folder: Path) -> list[FigureEntry]:
     ]
 
 
+def _uncertainty_figures(inputs: ReportInputs, folder: Path) -> list[FigureEntry]:
+    made = uncertainty_figures(
+        inputs.posterior, inputs.predictions, _outputs(inputs.predictions), folder
+    )
+    return [FigureEntry("Uncertainty", title, text, path) for title, text, path in made]
+
+
 def _emulator_figures(inputs: ReportInputs, folder: Path) -> list[FigureEntry]:
     em, loo = inputs.emulator, inputs.loo
     loo_means = fg.loo_predictions(em)
@@ -283,7 +292,8 @@ def _prediction_figures(inputs: ReportInputs, folder: Path) -> list[FigureEntry]
             FigureEntry(
                 "Predictions",
                 f"{o}: calibrated model",
-                "Measured, nominal (dashed) and calibrated prediction with its 95 % band.",
+                "Measured, nominal (dashed) and calibrated prediction with the 95 % and 50 % "
+                "bands of a measurement (see Uncertainty for what they include).",
                 fg.plot_fit(
                     folder / f"fit_{slug}.png",
                     times,
@@ -294,6 +304,10 @@ def _prediction_figures(inputs: ReportInputs, folder: Path) -> list[FigureEntry]
                     _values(ds, f"{o}_calibrated_lower"),
                     _values(ds, f"{o}_calibrated_upper"),
                     nominal=_values(ds, f"{o}_nominal"),
+                    band50=(
+                        _values(ds, f"{o}_calibrated_lower50"),
+                        _values(ds, f"{o}_calibrated_upper50"),
+                    ),
                 ),
             )
         )
@@ -370,6 +384,7 @@ def write_figures(inputs: ReportInputs, folder: str | Path) -> list[FigureEntry]
     target.mkdir(parents=True, exist_ok=True)
     makers: list[Callable[[ReportInputs, Path], list[FigureEntry]]] = [
         _posterior_figures,
+        _uncertainty_figures,
         _emulator_figures,
         _prediction_figures,
         _delta_figures,
@@ -416,6 +431,11 @@ def _ess(value: object) -> str:
 def _posterior_table(post: Posterior) -> str:
     table = post.summary()
     units = {name: prior.unit for name, prior in post.priors.items()}
+    units |= {name: "1" for name in post.aux_names}
+    units |= {
+        ("noise_sd" if len(post.noise) == 1 else f"noise_sd_{o.name}"): o.unit for o in post.noise
+    }
+    units |= {name: d.unit for name, d in post.derived.items()}
     rows = [
         [
             name,
@@ -597,6 +617,9 @@ def render(inputs: ReportInputs, entries: Sequence[FigureEntry]) -> str:
     bodies = {
         "Summary": _summary(inputs),
         "Calibration parameters": _parameters(inputs),
+        "Uncertainty": uncertainty_section(
+            inputs.posterior, inputs.predictions, _outputs(inputs.predictions), _table
+        ),
         "Fit metrics": _metrics(inputs),
         "Emulator": _emulator(inputs),
         "Discrepancy": _discrepancy(inputs),

@@ -458,6 +458,22 @@ class TestBox:
         """Steady heat-loss coefficient, air node to outside (:func:`steady_ua`). [W/K]"""
         return steady_ua(self.values(parameters), wind_speed, temp_radiant)
 
+    @property
+    def derived_units(self) -> dict[str, tuple[str, str]]:
+        """The box's physical summaries (:class:`~bayescal.simulators.base.Derivable`)."""
+        return {
+            "UA": ("W/K", "steady heat-loss coefficient, air node to outside, without wind"),
+            "R_wall": ("m²·K/W", "thermal resistance of the walls (thickness / k_wall)"),
+        }
+
+    def derived(self, parameters: Mapping[str, float]) -> dict[str, float]:
+        """Steady heat-loss coefficient and the walls' resistance at ``parameters``."""
+        values = self.values(parameters)
+        return {
+            "UA": steady_ua(values, 0.0, 10.0),
+            "R_wall": values["thickness"] / values["k_wall"],
+        }
+
     def simulate(self, parameters: Mapping[str, float], forcing: Forcing) -> dict[str, np.ndarray]:
         """Run once; outputs at the forcing's instants (see the module docstring)."""
         run = self.run(parameters, forcing)

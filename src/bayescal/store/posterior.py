@@ -38,7 +38,7 @@ import pandas as pd
 import xarray as xr
 
 from bayescal.atomic import atomic_write_path, atomic_write_text
-from bayescal.calibration.posterior import LAMBDA_NAMES, Posterior
+from bayescal.calibration.posterior import LAMBDA_NAMES, Derived, Posterior
 from bayescal.design import prior_from_spec
 from bayescal.emulator.noise import OutputNoise
 from bayescal.store.netcdf import (
@@ -74,6 +74,12 @@ def _aux_description(name: str) -> str:
     if name.startswith("lambda_star"):
         which = name.removeprefix("lambda_star").lstrip("_") or "the output"
         return f"precision lambda* of the measurement error of {which} (standardised units)"
+    if name.startswith("delta_rel"):
+        which = name.removeprefix("delta_rel").lstrip("_") or "the output"
+        return (
+            f"variance of the model discrepancy of {which} relative to the emulator's "
+            "prior variance of a weight"
+        )
     which = name.removeprefix("phi").lstrip("_") or "the output"
     return f"AR(1) coefficient of the measurement errors of {which} within a period"
 
@@ -94,6 +100,7 @@ def variable_attributes(posterior: Posterior) -> dict[str, tuple[str, str]]:
     for o in posterior.noise:
         text = f"standard deviation of the measurement error of {o.name}"
         out[_noise_name(posterior, o.name)] = (o.unit, text)
+    out |= {name: (d.unit, d.description) for name, d in posterior.derived.items()}
     out[LOG_DENSITY] = ("", "log posterior density (up to a constant) at the draw")
     return out
 
@@ -110,6 +117,8 @@ def posterior_dataset(posterior: Posterior) -> xr.Dataset:
     data = {name: (("chain", "draw"), draws[..., k]) for k, name in enumerate(posterior.all_names)}
     for output, sd in posterior.noise_sd().items():
         data[_noise_name(posterior, output)] = (("chain", "draw"), sd)
+    for name, derived in posterior.derived.items():
+        data[name] = (("chain", "draw"), derived.draws)
     data[LOG_DENSITY] = (("chain", "draw"), posterior.log_density)
     ds = xr.Dataset(
         data,
@@ -157,6 +166,10 @@ def save_posterior(
             "names": json.dumps(list(posterior.names)),
             "aux_names": json.dumps(list(posterior.aux_names)),
             "noise": json.dumps([dataclasses.asdict(o) for o in posterior.noise]),
+            "derived": json.dumps(
+                {n: [d.unit, d.description] for n, d in posterior.derived.items()},
+                ensure_ascii=False,
+            ),
             "priors": json.dumps({n: p.spec() for n, p in posterior.priors.items()}),
             "seed": posterior.seed,
             "algebra": posterior.algebra,
@@ -195,6 +208,11 @@ def load_posterior(path: str | os.PathLike[str]) -> Posterior:
     priors = {n: prior_from_spec(**spec) for n, spec in json.loads(extra.attrs["priors"]).items()}
     aux_names = json.loads(extra.attrs.get("aux_names", json.dumps(LAMBDA_NAMES)))
     noise = tuple(_output_noise(o) for o in json.loads(extra.attrs.get("noise", "[]")))
+    specs = json.loads(extra.attrs.get("derived", "{}"))
+    derived = {}
+    if specs:
+        flat = read_dataset(path)
+        derived = {n: Derived(flat[n].values, u, d) for n, (u, d) in specs.items()}
     return Posterior.build(
         names=json.loads(extra.attrs["names"]),
         priors=priors,
@@ -206,7 +224,7 @@ def load_posterior(path: str | os.PathLike[str]) -> Posterior:
         aux=np.stack([post[n].values for n in aux_names], axis=-1),
         aux_names=aux_names,
         noise=noise,
-    )
+    ).with_derived(derived)
 
 
 def _output_noise(spec: dict[str, Any]) -> OutputNoise:
