@@ -288,23 +288,29 @@ class BatchedPosterior:
         out: FloatArray = prior + np.where(self._session.ok, self._session.values, -math.inf)
         return out
 
-    def propose(self, points: FloatArray, coordinate: int) -> FloatArray:
-        """Log posterior with ``coordinate`` of the current points replaced."""
+    def propose(self, points: FloatArray, coordinate: int | tuple[int, ...]) -> FloatArray:
+        """Log posterior with ``coordinate`` of the current points replaced (a tuple:
+        several coordinates of theta*, moved jointly)."""
         session, t = self._session, self.t
         if session is None:
             return self(points)
+        moved = coordinate if isinstance(coordinate, tuple) else (coordinate,)
+        if len(moved) > 1 and max(moved) >= t:
+            raise ValueError(f"a joint move must stay within theta* (0..{t - 1}), got {moved}")
         terms = self._prior_terms.copy()
-        terms[:, coordinate] = self.priors.term(points[:, coordinate], coordinate)
+        for k in moved:
+            terms[:, k] = self.priors.term(points[:, k], k)
         prior = terms.sum(axis=1)
+        coordinate = moved[0]
         if coordinate < t:
             values, ok = session.propose_theta(points[:, :t])
         else:
             # Rows outside the prior are evaluated at their current precision (-inf anyway).
             column = points[:, coordinate]
             current = session.lam if coordinate == t else session.lam_star
-            moved = np.where(column > 0.0, column, current)
+            value = np.where(column > 0.0, column, current)
             move = session.propose_lam if coordinate == t else session.propose_lam_star
-            values, ok = move(moved)
+            values, ok = move(value)
         self._pending_terms = terms
         out: FloatArray = prior + np.where(ok, values, -math.inf)
         return out
@@ -406,8 +412,17 @@ def default_sampler(target: CalibrationPosterior, n_burn: int) -> MetropolisWith
     scales += [0.5] * terms.n_phi + [1.0] * terms.n_delta
     # Short batches and a generous cap: the widths of sharply identified
     # parameters must shrink by ~e^3 within a burn-in of a few hundred sweeps.
+    # theta* also moves jointly once per sweep: correlated parameters (a resistance
+    # split, heat loss against solar gains) form ridges that one-coordinate steps crawl.
+    joint = tuple(range(t)) if t >= 2 else ()
     return MetropolisWithinGibbs(
-        n_burn=n_burn, lower=lower, upper=upper, scales=scales, batch_size=25, max_adapt=0.25
+        n_burn=n_burn,
+        lower=lower,
+        upper=upper,
+        scales=scales,
+        batch_size=25,
+        max_adapt=0.25,
+        joint=joint,
     )
 
 
