@@ -42,7 +42,7 @@ def test_period_density_is_the_gaussian_of_the_samples(
     got = period_log_densities(obs, values, mean, var, ktk, variances, obs.ls_weights())
     for i in range(m):
         want = 0.0
-        for (rows, bases, lam, ph, rel) in (
+        for rows, bases, lam, ph, rel in (
             (slice(0, 7), [0, 1], 9.0, phi, 0.3 if discrepancy else 0.0),
             (slice(7, 12), [2], 4.0, 0.0, 0.0),
         ):

@@ -83,7 +83,7 @@ def calibrate_split(
     )
     em = train(a, n_burn=300, n_draws=100, n_chains=1, seed=seed)
     post = calibrate(
-        em, a, n_chains=4, n_burn=1000, n_draws=1000, seed=seed, backend="processes",
+        em, a, n_chains=4, n_burn=2000, n_draws=1500, seed=seed, backend="processes",
         observations=a.observations,
     )  # fmt: skip
     pick = draw_picks(post)

@@ -6,9 +6,11 @@ threefold when the temperature at the concrete / inside-board interface is
 calibrated beside the inside heat flux (measured: 0.0058 -> 0.00018, 33x, on
 seed 0 with 20 training days), both outputs get their own noise level back
 (within 10 % of the injected SDs), and each output's 95 % and 50 % bands cover
-its measurements at their rates on the training and the test windows (bounds
-0.92-0.98 and 0.42-0.58: one truth, about 700 training samples whose band
-indicators are correlated through the shared draws).
+its measurements at their rates on the training and the test windows: within
+3.5 binomial standard errors of 0.95 and 0.5 for the window's number of samples
+(672 training, 144 test; the noise is white, so the samples' indicators are
+close to independent given the posterior). Chains: 4 x (2000 + 1500) draws, the
+flux-only posterior being a curved ridge (R-hat and ESS checked).
 """
 
 from __future__ import annotations
@@ -57,5 +59,6 @@ def test_each_output_has_its_own_noise_and_bands(both: Result) -> None:
     for name in OUTPUTS:
         assert np.median(sd[name]) == pytest.approx(NOISE_SD[name], rel=0.10), name
         for window, (c95, c50) in cover[name].items():
-            assert 0.92 <= c95 <= 0.98, (name, window, c95)
-            assert 0.42 <= c50 <= 0.58, (name, window, c50)
+            n = 672 if window == "train" else 144
+            for rate, level in ((c95, 0.95), (c50, 0.5)):
+                assert abs(rate - level) < 3.5 * np.sqrt(level * (1 - level) / n), (name, window)

@@ -12,10 +12,13 @@ the *joint block* ``J`` then also move together:
 
 on the sampling scale, accepted by Metropolis with the Jacobians of the
 bounded coordinates. During burn-in ``C`` is the empirical covariance of
-``z_J`` over the burn-in sweeps after the first quarter (Haario, Saksman &
-Tamminen 2001), with ``1e-9 mean(diag C)`` added to its diagonal, once it has
-at least ``2 |J| + 10`` sweeps; before that the diagonal of the coordinates'
-own proposal widths squared divided by 2.4^2 (their conditional spread).
+``z_J`` (Haario, Saksman & Tamminen 2001) with ``1e-9 mean(diag C)`` added to
+its diagonal, estimated in two windows as Stan's warm-up does: over the second
+quarter of burn-in, then afresh over its second half (the first window still
+holds the chains' way in from dispersed starts; the second sees the target
+only). A window's estimate is used once it has ``2 |J| + 10`` sweeps; before
+the first, ``C`` is the diagonal of the coordinates' own proposal widths
+squared divided by 2.4^2 (their conditional spread).
 ``g`` moves by the same Roberts–Rosenthal step as the widths towards the
 acceptance rate 0.234 (Roberts, Gelman & Gilks 1997). After burn-in ``L`` is
 frozen, so the kept draws come from a fixed reversible kernel (a composition
@@ -63,9 +66,11 @@ class JointState:
     log_g
         Log of the extra proposal scale ``g``.
     n, mean, m2
-        Welford accumulators of ``z_J`` over the collected burn-in sweeps.
+        Welford accumulators of ``z_J`` over the current window's sweeps.
     chol
         Current proposal factor ``L`` ``(|J|, |J|)``.
+    cov
+        The last usable covariance estimate (zeros before the first).
     accepted
         Accepted joint moves since the last reset.
     """
@@ -75,13 +80,20 @@ class JointState:
     mean: FloatArray
     m2: FloatArray
     chol: FloatArray
+    cov: FloatArray
     accepted: int = 0
 
     @classmethod
     def start(cls, widths: FloatArray) -> JointState:
         """The state before any adaptation, from the coordinates' proposal widths."""
         k = widths.size
-        return cls(0.0, 0, np.zeros(k), np.zeros((k, k)), _diagonal_factor(widths, 0.0))
+        zeros = np.zeros((k, k))
+        return cls(0.0, 0, np.zeros(k), zeros, _diagonal_factor(widths, 0.0), zeros.copy())
+
+    def restart(self) -> None:
+        """Open a new estimation window (the last estimate stays in use until replaced)."""
+        k = self.mean.size
+        self.n, self.mean, self.m2 = 0, np.zeros(k), np.zeros((k, k))
 
     def collect(self, z_joint: FloatArray) -> None:
         """Add one burn-in sweep's ``z_J`` to the covariance estimate (Welford)."""
@@ -96,10 +108,12 @@ class JointState:
         k = widths.size
         if self.n >= min_samples(k):
             cov = self.m2 / (self.n - 1)
-            cov = cov + 1e-9 * float(np.mean(np.diag(cov))) * np.eye(k)
+            self.cov = cov + 1e-9 * float(np.mean(np.diag(cov))) * np.eye(k)
+        if np.any(self.cov):
             try:
                 self.chol = np.asarray(
-                    np.linalg.cholesky(math.exp(2.0 * self.log_g) * HAARIO / k * cov), dtype=float
+                    np.linalg.cholesky(math.exp(2.0 * self.log_g) * HAARIO / k * self.cov),
+                    dtype=float,
                 )
                 return
             except np.linalg.LinAlgError:
@@ -114,6 +128,7 @@ class JointState:
             f"{prefix}mean": self.mean,
             f"{prefix}m2": self.m2,
             f"{prefix}chol": self.chol,
+            f"{prefix}cov": self.cov,
         }
 
     @classmethod
@@ -126,6 +141,7 @@ class JointState:
             np.array(arrays[f"{prefix}mean"], dtype=float),
             np.array(arrays[f"{prefix}m2"], dtype=float),
             np.array(arrays[f"{prefix}chol"], dtype=float),
+            np.array(arrays[f"{prefix}cov"], dtype=float),
             int(accepted),
         )
 
@@ -140,6 +156,11 @@ def _diagonal_factor(widths: FloatArray, log_g: float) -> FloatArray:
 def collecting(n_done: int, n_burn: int) -> bool:
     """Whether the sweep after ``n_done`` adds to the covariance estimate."""
     return n_burn // 4 <= n_done < n_burn
+
+
+def restarting(n_done: int, n_burn: int) -> bool:
+    """Whether the sweep after ``n_done`` opens the second estimation window."""
+    return n_done == n_burn // 2
 
 
 def propose(z_joint: FloatArray, chol: FloatArray, eps: FloatArray) -> FloatArray:

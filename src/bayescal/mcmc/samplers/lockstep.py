@@ -433,6 +433,8 @@ class _Lockstep:
                 self._joint_update(s, eps_j[row], log_u_j[row])
                 if jm.collecting(n_done + row, self.n_burn):
                     for b, js in enumerate(s.joint or ()):
+                        if jm.restarting(n_done + row, self.n_burn):
+                            js.restart()
                         js.collect(s.z[b, self.joint])
             done = n_done + row + 1
             if keep_every and (done - keep_start) % keep_every == 0:

@@ -355,6 +355,8 @@ class _Loop:
                 lp = s.lp
                 if jm.collecting(n_done + row, self.n_burn):
                     assert s.joint is not None
+                    if jm.restarting(n_done + row, self.n_burn):
+                        s.joint.restart()
                     s.joint.collect(np.array([z[i] for i in self.joint]))
             done = n_done + row + 1
             if keep_every and (done - keep_start) % keep_every == 0:
