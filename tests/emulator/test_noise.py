@@ -17,6 +17,7 @@ is rounding in factorisations of matrices of a few hundred rows.
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 import pytest
@@ -24,6 +25,7 @@ from scipy import linalg, stats
 
 from bayescal.calibration.dense import DenseCalibrationDensity
 from bayescal.calibration.kron import KronCalibrationDensity
+from bayescal.emulator.assemble import Assembled, NoiseSpec, assemble
 from bayescal.emulator.dense import gaussian_logdensity, grid_inputs
 from bayescal.emulator.kernel import SeparableKernel
 from bayescal.emulator.noise import (
@@ -252,3 +254,18 @@ def test_discrepancy_variance_agrees_with_the_dense_covariance(seed: int) -> Non
     )
     # The discrepancy changes the density (the test can fail).
     assert kron.pieces_nuggets(ts, a, a_star).logpdf != pytest.approx(ref, rel=1e-6)
+
+
+def test_assemble_carries_each_outputs_error_model(
+    small_wall: tuple[Any, Assembled, Any],
+) -> None:
+    ve, _, _ = small_wall
+    a = assemble(
+        ve.design, ve.runs, ve.measured, ve.boundary, ve.layout, variance=0.99, history=1,
+        scale="output", noise={"heat_flux_in": NoiseSpec("ar1", 0.1, discrepancy=True)},
+    )  # fmt: skip
+    (o,) = a.observations.outputs
+    assert (o.model, o.discrepancy, o.unit) == ("ar1", True, "W/m²")
+    assert a.observations.names() == ("lambda_star", "phi", "delta_rel")
+    # the stated accuracy is the prior's centre, in standardised units
+    assert o.prior[0] / o.prior[1] == pytest.approx((o.scale / 0.1) ** 2)

@@ -105,7 +105,8 @@ Spread = float | str
 
 
 class OutputError(Section):
-    """``[outputs.errors.<name>]``: the measurement error model of one calibrated output."""
+    """``[outputs.errors.<name>]``: the measurement error model of one measured output
+    (calibrated or held out)."""
 
     model: Literal["white", "ar1"] = field_doc(
         "Errors independent from sample to sample ('white', the paper) or AR(1) within a "
@@ -153,10 +154,32 @@ class OutputsSection(Section):
         min_length=1,
     )
     errors: dict[str, OutputError] = field_doc(
-        "Measurement error model per calibrated output (default: white errors, weak prior).",
+        "Measurement error model per calibrated output (default: white errors, weak prior); "
+        "for a held-out output its sd (required) is the sensor noise of its band.",
         {"heat_flux_in": {"model": "ar1", "sd": "0.1 W/m2"}},
         default_factory=dict,
     )
+    held_out: list[str] = field_doc(
+        "Measured outputs predicted but never calibrated on: held-out sensors that test the "
+        "calibrated model where it was not fitted (a temperature inside the wall when the "
+        "flux is calibrated). Each needs [outputs.errors.<name>] sd, the sensor's accuracy; "
+        "its band is the simulator re-run at posterior draws plus that noise (needs "
+        "[predict] method = 'simulator'). Its metrics are reported on both windows, both "
+        "unseen by the calibration.",
+        ["temp_interface_2"],
+        default_factory=list,
+    )
+
+    def calibration_dump(self) -> dict[str, Any]:
+        """The section without the held-out outputs (what the emulator and calibration read)."""
+        return {
+            "calibrate": list(self.calibrate),
+            "errors": {
+                name: spec.model_dump(mode="json")
+                for name, spec in self.errors.items()
+                if name not in self.held_out
+            },
+        }
 
     def noise_sd(self, name: str) -> float | tuple[float, float] | None:
         """The stated accuracy of output ``name`` in its internal unit (``None`` if not given).
@@ -453,8 +476,9 @@ class Study(Section):
 
     @property
     def boundary_conditions(self) -> tuple[str, ...]:
-        """Mapped columns that are not calibrated outputs."""
-        return tuple(n for n in self.data.columns if n not in self.outputs.calibrate)
+        """Mapped columns that are neither calibrated nor held-out outputs."""
+        measured = {*self.outputs.calibrate, *self.outputs.held_out}
+        return tuple(n for n in self.data.columns if n not in measured)
 
     def priors(self) -> dict[str, Prior]:
         """Parameter name -> prior (:class:`bayescal.design.Prior`), with unit and description."""
@@ -606,10 +630,11 @@ def _output_problems(study: Study) -> list[str]:
             )
         elif name in study.outputs.calibrate:
             problems.append(f"outputs.calibrate: {name!r} is an input of the {sim} simulator")
+    problems += _held_out_problems(study)
     for name in study.outputs.errors:
-        if name not in study.outputs.calibrate:
+        if name not in study.outputs.calibrate and name not in study.outputs.held_out:
             problems.append(
-                f"outputs.errors.{name}: {name!r} is not a calibrated output "
+                f"outputs.errors.{name}: {name!r} is neither a calibrated nor a held-out output "
                 f"(outputs.calibrate: {', '.join(study.outputs.calibrate)})"
             )
             continue
@@ -624,6 +649,40 @@ def _output_problems(study: Study) -> list[str]:
         problems.append(
             "calibration.sampler: 'nuts' samples one output with white errors; use 'mwg' "
             "for several outputs or AR(1) errors"
+        )
+    return problems
+
+
+def _held_out_problems(study: Study) -> list[str]:
+    """What ``[outputs] held_out`` needs: mapped, simulated, not calibrated, an accuracy."""
+    problems = []
+    produced, sim = study.simulator.output_names(), study.simulator.type
+    for name in study.outputs.held_out:
+        where = f"outputs.held_out: {name!r}"
+        if name in study.outputs.calibrate:
+            problems.append(f"{where} is also calibrated on; a held-out sensor is never fitted")
+        if name not in study.data.columns:
+            problems.append(f"{where} is not mapped in [data.columns]")
+        if produced and name not in produced:
+            problems.append(
+                f"{where}: the {sim} simulator does not produce it; add it to the simulator's "
+                f"outputs (it produces {', '.join(produced)})"
+            )
+        spec = study.outputs.errors.get(name)
+        if spec is None or spec.sd is None:
+            problems.append(
+                f"{where} needs the sensor's accuracy for its band: [outputs.errors.{name}] "
+                "sd = '<number> <unit>'"
+            )
+        elif spec.model != "white" or spec.discrepancy:
+            problems.append(
+                f"outputs.errors.{name}: a held-out sensor takes only sd (its band's noise); "
+                "model and discrepancy apply to calibrated outputs"
+            )
+    if study.outputs.held_out and study.predict.method != "simulator":
+        problems.append(
+            "outputs.held_out: held-out sensors are predicted by re-running the simulator; "
+            "set [predict] method = 'simulator'"
         )
     return problems
 

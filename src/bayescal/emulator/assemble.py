@@ -56,6 +56,7 @@ from bayescal.emulator.noise import (
     noise_prior_from_sd,
 )
 from bayescal.errors import ConfigError, DataError
+from bayescal.glossary import GLOSSARY
 from bayescal.periods import PeriodLayout
 
 __all__ = ["Assembled", "NoiseSpec", "OutputStack", "assemble", "runs_to_columns"]
@@ -412,5 +413,10 @@ def _observations(
             DEFAULT_NOISE_PRIOR if spec.sd is None else noise_prior_from_sd(spec.sd, scale, name)
         )
         bases = tuple(j for j, g in enumerate(basis.groups) if g == q)
-        outputs.append(OutputNoise(name, (sl.start, sl.stop), bases, spec.model, prior, scale))
+        unit = GLOSSARY[name].unit if name in GLOSSARY else ""
+        outputs.append(
+            OutputNoise(
+                name, (sl.start, sl.stop), bases, spec.model, prior, scale, unit, spec.discrepancy
+            )
+        )
     return ObservationModel(tuple(outputs), basis.k, y_star)

@@ -307,6 +307,54 @@ def simulator_band(
     return _mixture_band(means, variances, measured or {}, level)
 
 
+def held_out_band(
+    layout: PeriodLayout,
+    runs: Mapping[str, np.ndarray],
+    noise_sd: Mapping[str, float],
+    measured: Mapping[str, np.ndarray],
+    level: float = 0.95,
+) -> Band:
+    """Bands of held-out sensors: the simulator at posterior draws plus the sensor's noise.
+
+    Parameters
+    ----------
+    layout
+        The study's periods (bands on the training periods and the test window).
+    runs
+        Output name -> simulated series at ``S`` posterior draws ``(S, n_total)``.
+    noise_sd
+        Output name -> the sensor's stated accuracy (one standard deviation). [unit]
+    measured
+        Output name -> measured series ``(n_total,)``, for the PIT.
+    level
+        Probability of the outer band. [-]
+    """
+    covered = np.zeros(layout.n_total, dtype=bool)
+    for start in layout.train_starts:
+        covered[start : start + layout.period] = True
+    covered[layout.test_begin :] = True
+    means, variances = {}, {}
+    for name, sims in runs.items():
+        mean = np.asarray(sims, dtype=float)
+        means[name] = np.where(covered, mean, np.nan)
+        variances[name] = np.where(covered, float(noise_sd[name]) ** 2, np.nan) + 0.0 * mean
+    return _mixture_band(means, variances, measured, level)
+
+
+def merge_bands(first: Band, second: Band) -> Band:
+    """One band holding the outputs of both (same level)."""
+    return Band(
+        first.mean | second.mean,
+        first.lower | second.lower,
+        first.upper | second.upper,
+        first.lower50 | second.lower50,
+        first.upper50 | second.upper50,
+        first.pit | second.pit,
+        first.mc_error | second.mc_error,
+        first.level,
+    )
+
+
 def delta_series(
     assembled: Assembled,
     discrepancy: DiscrepancyModel,
@@ -381,7 +429,8 @@ def predictions_dataset(
     Variables ``{o}_measured``, ``{o}_nominal``, ``{o}_calibrated``,
     ``{o}_calibrated_lower``/``_upper`` and, with a discrepancy, ``{o}_delta``,
     ``{o}_corrected``, ``{o}_corrected_lower``/``_upper``; boundary conditions
-    as ``bc_{name}``. Coordinates ``time`` (UTC) and ``window``.
+    as ``bc_{name}``. Coordinates ``time`` (UTC) and ``window``. Held-out
+    outputs (``attrs["held_out"]``) have no corrected series.
     """
     data: dict[str, Any] = {}
     for o in measured:
@@ -389,17 +438,17 @@ def predictions_dataset(
         what = f"{o} ({GLOSSARY[o].description})" if o in GLOSSARY else o
         series = {"measured": measured[o], "nominal": nominal[o]}
         series |= _band_series("calibrated", calibrated, o)
-        if corrected is not None and delta is not None:
+        if corrected is not None and delta is not None and o in delta:
             series |= {"delta": delta[o], **_band_series("corrected", corrected, o)}
         for kind, values in series.items():
             text = _SERIES[kind].format(what=what)
-            attrs = {"units": unit, "long_name": f"{o} {kind}", "description": text}
-            data[f"{o}_{kind}"] = ("time", np.asarray(values, dtype=float), attrs)
+            var = {"units": unit, "long_name": f"{o} {kind}", "description": text}
+            data[f"{o}_{kind}"] = ("time", np.asarray(values, dtype=float), var)
     for b, values in boundary.items():
         unit = GLOSSARY[b].unit if b in GLOSSARY else ""
         text = f"boundary condition {b}" + (f": {GLOSSARY[b].description}" if b in GLOSSARY else "")
-        attrs = {"units": unit, "long_name": b, "description": text}
-        data[f"bc_{b}"] = ("time", np.asarray(values, dtype=float), attrs)
+        var = {"units": unit, "long_name": b, "description": text}
+        data[f"bc_{b}"] = ("time", np.asarray(values, dtype=float), var)
     coords = {
         "time": ("time", np.asarray(times).astype("datetime64[ns]"), {"description": "UTC"}),
         "window": ("time", windows(layout), {"description": _WINDOW}),

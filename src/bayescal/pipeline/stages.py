@@ -34,11 +34,13 @@ from bayescal.design import Design, Prior, latin_hypercube
 from bayescal.emulator.assemble import Assembled, NoiseSpec, assemble
 from bayescal.emulator.gp import Emulator, LooResult
 from bayescal.emulator.training import train
-from bayescal.errors import SimulatorError
+from bayescal.errors import ConfigError, SimulatorError
 from bayescal.pipeline.keys import derived_seed
 from bayescal.pipeline.predict import (
     Band,
     delta_series,
+    held_out_band,
+    merge_bands,
     metrics_table,
     predict_band,
     predictions_dataset,
@@ -370,18 +372,27 @@ def predict_stage(
         corrected = _band(ctx, em, discrepancy.posterior, discrepancy)
         delta = delta_series(em.assembled, discrepancy, list(em.emulator.outputs.names))
     m = ctx.measured
+    held = ctx.study.outputs.held_out
     ds = predictions_dataset(
         m.times,
         m.layout,
-        {o: m.outputs[o] for o in ctx.study.outputs.calibrate},
+        {o: m.outputs[o] for o in ctx.study.outputs.calibrate} | dict(m.held_out),
         nominal if nominal is not None else nominal_run(ctx),
         band,
         m.forcing.series,
         corrected,
         delta,
-        attrs={"level": section.level, "study": ctx.study.study.name},
+        attrs={"level": section.level, "study": ctx.study.study.name, "held_out": ",".join(held)},
     )
     return Predictions(ds, metrics_table(ds))
+
+
+def held_out_sd(ctx: Context, name: str) -> float:
+    """A held-out sensor's noise SD: its stated accuracy (a range: the geometric mean)."""
+    value = ctx.study.outputs.noise_sd(name)
+    if value is None:  # pragma: no cover - the study's validation requires it
+        raise ConfigError(f"outputs.held_out: {name!r} has no [outputs.errors.{name}] sd")
+    return float(value) if isinstance(value, float) else float(np.sqrt(value[0] * value[1]))
 
 
 def posterior_runs(
@@ -409,7 +420,7 @@ def _band(
     # emulator + Delta RMSE 2.25 W/m², simulator + Delta see docs/case-studies.md).
     if section.method == "simulator":
         runs, lam_star = posterior_runs(ctx, posterior, section.runs)
-        return simulator_band(
+        band = simulator_band(
             em.assembled,
             {o: runs[o] for o in em.emulator.outputs.names},
             lam_star,
@@ -417,6 +428,17 @@ def _band(
             discrepancy=discrepancy,
             measured=measured,
         )
+        held = ctx.study.outputs.held_out
+        if discrepancy is not None or not held:
+            return band
+        extra = held_out_band(
+            ctx.measured.layout,
+            {o: runs[o] for o in held},
+            {o: held_out_sd(ctx, o) for o in held},
+            ctx.measured.held_out,
+            section.level,
+        )
+        return merge_bands(band, extra)
     return predict_band(
         em.emulator,
         em.assembled,

@@ -173,6 +173,16 @@ def _outputs(ds: xr.Dataset) -> list[str]:
     return [o for o in str(ds.attrs.get("outputs", "")).split(",") if o]
 
 
+def _held_out(ds: xr.Dataset) -> set[str]:
+    return {o for o in str(ds.attrs.get("held_out", "")).split(",") if o}
+
+
+HELD_OUT_NOTE = (
+    " Held-out sensor: never calibrated on; its band is the simulator at posterior draws "
+    "plus the sensor's stated noise."
+)
+
+
 def _boundary(ds: xr.Dataset) -> list[str]:
     return [b for b in str(ds.attrs.get("boundary", "")).split(",") if b and f"bc_{b}" in ds]
 
@@ -291,9 +301,10 @@ def _prediction_figures(inputs: ReportInputs, folder: Path) -> list[FigureEntry]
         out.append(
             FigureEntry(
                 "Predictions",
-                f"{o}: calibrated model",
+                f"{o}: calibrated model" + (" (held out)" if o in _held_out(ds) else ""),
                 "Measured, nominal (dashed) and calibrated prediction with the 95 % and 50 % "
-                "bands of a measurement (see Uncertainty for what they include).",
+                "bands of a measurement (see Uncertainty for what they include)."
+                + (HELD_OUT_NOTE if o in _held_out(ds) else ""),
                 fg.plot_fit(
                     folder / f"fit_{slug}.png",
                     times,
@@ -494,7 +505,7 @@ def _metric_cell(column: MetricColumn, value: Any) -> str:
     return _num(float(value) * column.scale)
 
 
-def _metrics_block(metrics: pd.DataFrame, output: str, window: str) -> str:
+def _metrics_block(metrics: pd.DataFrame, output: str, window: str, held: bool = False) -> str:
     rows = metrics[(metrics["output"] == output) & (metrics["window"] == window)]
     if rows.empty:
         return ""
@@ -511,13 +522,16 @@ def _metrics_block(metrics: pd.DataFrame, output: str, window: str) -> str:
         cells = [_metric_cell(c, r[c.name]) for c in columns]
         body.append([model.replace("+delta", " + Δ"), *cells])
     title = f"{output} [{unit}], {WINDOWS.get(window, window)}"
+    if held:
+        title += " (held-out sensor: never calibrated on)"
     return f"<h3>{_e(title)}</h3>" + _table(header, body)
 
 
 def _metrics(inputs: ReportInputs) -> str:
     m = inputs.metrics
     outputs = list(dict.fromkeys([*_outputs(inputs.predictions), *m["output"].unique()]))
-    blocks = [_metrics_block(m, o, w) for o in outputs for w in ("train", "test")]
+    held = _held_out(inputs.predictions)
+    blocks = [_metrics_block(m, o, w, o in held) for o in outputs for w in ("train", "test")]
     text = "".join(b for b in blocks if b)
     return METRIC_NOTE + (text or "<p>No metrics were computed.</p>")
 
