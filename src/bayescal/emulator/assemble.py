@@ -412,5 +412,15 @@ def _observations(
             DEFAULT_NOISE_PRIOR if spec.sd is None else noise_prior_from_sd(spec.sd, scale, name)
         )
         bases = tuple(j for j, g in enumerate(basis.groups) if g == q)
-        outputs.append(OutputNoise(name, (sl.start, sl.stop), bases, spec.model, prior, scale))
+        outputs.append(
+            OutputNoise(
+                name,
+                (sl.start, sl.stop),
+                bases,
+                spec.model,
+                prior,
+                scale,
+                discrepancy=spec.discrepancy,
+            )
+        )
     return ObservationModel(tuple(outputs), basis.k, y_star)
