@@ -261,7 +261,7 @@ def report(study: Path) -> None:
     default=5,
     show_default=True,
     help="Exact refits per study at most, for periods whose Pareto k exceeds 0.7 "
-    "(worst first); each costs about one calibration.",
+    "(worst first); each runs the study's [calibration] chains again, without the period.",
 )
 @click.option(
     "--draws",
@@ -298,9 +298,14 @@ def compare(
     finished stages are reused); then every training period is left out in
     turn and the measurements of that period are scored by their log density
     under the calibration on the others (PSIS, with exact refits where the
-    Pareto k exceeds 0.7). The variants are ranked by the sum, the ELPD. Only
-    the training periods are read: the test window is left for the final
-    metrics of the variant chosen.
+    Pareto k exceeds 0.7). The variants are ranked by the sum, the ELPD, with
+    the difference to the best and its standard error. Only the training
+    periods are read: the test window is left for the final metrics of the
+    variant chosen.
+
+    Writes compare.csv (the ranking), compare-periods.csv (every period of
+    every variant), compare.png and compare.md into --output; each study keeps
+    its scores in OUTPUT_DIR/leave-period-out.npz for the next comparison.
     """
     from bayescal.cli.progress import comparison_text, progress_options
     from bayescal.pipeline import Options
