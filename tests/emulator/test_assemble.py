@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from bayescal.emulator.assemble import assemble, runs_to_columns
+from bayescal.emulator.assemble import NoiseSpec, assemble, runs_to_columns
 from bayescal.emulator.noise import DEFAULT_NOISE_PRIOR
 from bayescal.errors import DataError
 from virtual_wall import PER_DAY, VirtualExperiment, virtual_experiment
@@ -143,3 +143,16 @@ def test_history_adds_the_previous_periods_conditions(small: VirtualExperiment) 
     np.testing.assert_allclose(lag.mean, before.mean(axis=1), rtol=1e-12)
     # The basis and the weights do not depend on x.
     np.testing.assert_array_equal(lagged.w, base.w)
+
+
+def test_noise_specs_reach_the_observation_model(small: VirtualExperiment) -> None:
+    # [outputs.errors] discrepancy = true must switch the in-likelihood discrepancy on.
+    noise = {"heat_flux_in": NoiseSpec("ar1", None, discrepancy=True)}
+    a = assemble(
+        small.design, small.runs, small.measured, small.boundary, small.layout, noise=noise
+    )
+    (out,) = a.observations.outputs
+    assert (out.model, out.discrepancy) == ("ar1", True)
+    assert a.observations.names() == ("lambda_star", "phi", "delta_rel")
+    plain = assemble(small.design, small.runs, small.measured, small.boundary, small.layout)
+    assert not plain.observations.outputs[0].discrepancy

@@ -143,6 +143,7 @@ def test_cli_show_and_errors(first: tuple[Path, Results], tmp_path: Path) -> Non
     assert shown.exit_code == 0, shown.output
     assert re.search(r"k_cb\s+0\.12", shown.output)
     assert "max_abs_error is the paper's 'MAE'" in shown.output
+    assert "The test window is read only for these final metrics" in shown.output
     empty = _study(tmp_path)
     result = runner.invoke(main, ["show", str(empty)])
     assert result.exit_code == 2
