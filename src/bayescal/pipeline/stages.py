@@ -254,6 +254,7 @@ def build_emulator(
     try:
         emulator = train(
             assembled,
+            method=section.training,
             n_burn=section.burn,
             n_draws=section.samples,
             n_chains=n_chains,
