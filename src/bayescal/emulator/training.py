@@ -354,10 +354,11 @@ def train(
     seed
         Root seed of the chains or of the random starts (recorded in the emulator).
     backend
-        ``"processes"`` (``"mcmc"``: one worker per chain; ``"map"``: the bases
-        searched in up to ``os.cpu_count()`` workers), ``"serial"`` or
-        ``"vectorised"`` (``"mcmc"``: the chains in lockstep here, see
-        :func:`bayescal.mcmc.chains.run_chains`; ``"map"``: as ``"serial"``).
+        ``"processes"`` or ``"auto"`` (``"mcmc"``: one worker per chain;
+        ``"map"``: the bases searched in up to ``os.cpu_count()`` workers),
+        ``"serial"`` or ``"vectorised"`` (``"mcmc"``: the chains in lockstep
+        here, see :func:`bayescal.mcmc.chains.run_chains`; ``"map"``: as
+        ``"serial"``).
     priors
         Priors of ``tau`` and ``rho`` (default: the paper's).
     refine
@@ -390,7 +391,7 @@ def train(
     if method == "map":
         p = assembled.basis.p
         progress = _Progress(callback, n_chains * (n_burn + n_draws), p + 2)
-        processes = default_processes(p) if backend == "processes" else 1
+        processes = default_processes(p) if backend in ("processes", "auto") else 1
         fit = _fit_map(
             LogScalePosterior(*args, hp), n_draws, seed, processes, map_settings, progress
         )
