@@ -320,7 +320,7 @@ def calibrate(
     n_burn: int = 1000,
     n_draws: int = 1000,
     seed: int = 0,
-    backend: ChainBackend = "processes",
+    backend: ChainBackend = "auto",
     algebra: Kind = "kronecker",
     sampler: SamplerKind = "mwg",
     callback: Callable[[int], None] | None = None,
@@ -345,11 +345,13 @@ def calibrate(
     seed
         Root seed; chain ``k`` uses ``SeedSequence(seed).spawn(n_chains)[k]``.
     backend
-        ``"processes"`` (chains in worker processes), ``"serial"``, or
-        ``"vectorised"`` (all chains in lockstep in this process, one batched
-        likelihood call per coordinate update; ``sampler="mwg"`` only, no
-        checkpoints; draws equal the serial ones; 1.4-6x faster than serial
-        4-16 chains, see ``docs/benchmarks.md``).
+        ``"auto"`` (default: lockstep groups over the worker processes where the
+        batched likelihood exists, else worker processes; see
+        :func:`bayescal.mcmc.chains.choose_backend`), ``"processes"`` (chains in
+        worker processes), ``"serial"``, ``"vectorised"`` (all chains in
+        lockstep in this process, one batched likelihood call per coordinate
+        update; ``sampler="mwg"`` only; draws equal the serial ones; see
+        ``docs/benchmarks.md``) or ``"vectorised-processes"``.
     algebra
         ``"kronecker"`` (fast, default) or ``"dense"`` (reference).
     sampler

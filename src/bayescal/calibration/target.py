@@ -236,6 +236,22 @@ class CalibrationPosterior:
             pieces.append(piece)
         return self.algebra.with_observations(w_star), pieces
 
+    def lockstep_preferred(self, n_chains: int, workers: int) -> bool:
+        """Whether ``backend="auto"`` runs the chains in lockstep (in groups over ``workers``).
+
+        Yes where the batched likelihood exists (:meth:`lockstep`: one white
+        output, the Kronecker algebra, every period observed): there a lockstep
+        group of two or more chains costs less per chain than one serial chain
+        at every size measured (``docs/benchmarks.md``), so groups spread over
+        the workers beat one chain per worker. Elsewhere the lockstep form loops
+        over the rows, no faster than one chain: worker processes instead.
+        """
+        del n_chains, workers  # the answer does not depend on them (see above)
+        if not self.plain or self.algebra.stacked_grid() is None:
+            return False
+        data = self.algebra.data
+        return bool(data.obs_index.size == data.x.shape[0])
+
     def lockstep(self) -> LockstepTarget:
         """The same log posterior for ``B`` chains in lockstep.
 
@@ -470,7 +486,7 @@ def sample(
     n_burn: int = 1000,
     n_chains: int = 4,
     seed: int = 0,
-    backend: ChainBackend = "processes",
+    backend: ChainBackend = "auto",
     names: Sequence[str] | None = None,
     callback: Callable[[int], None] | None = None,
     checkpoint_dir: str | os.PathLike[str] | None = None,
@@ -487,8 +503,10 @@ def sample(
     n_draws, n_burn, n_chains, seed
         Kept draws and burn-in sweeps per chain, chains, root seed.
     backend
-        ``"processes"``, ``"serial"`` or ``"vectorised"`` (lockstep, batched
-        likelihood); see :func:`bayescal.mcmc.chains.run_chains`.
+        ``"auto"`` (lockstep groups over the workers where the batched
+        likelihood exists, else worker processes), ``"processes"``,
+        ``"serial"``, ``"vectorised"`` (lockstep, batched likelihood) or
+        ``"vectorised-processes"``; see :func:`bayescal.mcmc.chains.run_chains`.
     names
         Coordinate names (default: ``x0, x1, ...``).
     callback, checkpoint_dir, checkpoint_seconds

@@ -302,15 +302,31 @@ class EmulatorSection(Section):
         ge=0,
         le=7,
     )
+    training: Literal["map", "mcmc"] = field_doc(
+        "How the GP hyperparameters' MAP is found: 'map' (multi-start L-BFGS-B with the "
+        "exact gradient, stopped by its convergence criteria, and a Laplace approximation "
+        "for their uncertainty; at 500 runs x 200 periods x 5 bases many times faster than "
+        "'mcmc' for the same MAP, docs/benchmarks.md) or 'mcmc' (the paper's "
+        "Metropolis-within-Gibbs chains, burn and samples below, best draw refined).",
+        "mcmc",
+        default="map",
+    )
     burn: int = field_doc(
-        "Hyperparameter MCMC burn-in sweeps per chain (2 chains). The emulator uses the "
-        "MAP (best draw refined by L-BFGS-B); on the wall example 2 x (500 + 1000) and "
-        "2 x (1000 + 2000) sweeps gave the same MAP and leave-one-run-out RMSE.",
+        "training = 'mcmc': hyperparameter MCMC burn-in sweeps per chain (2 chains). The "
+        "emulator uses the MAP (best draw refined by L-BFGS-B); on the wall example "
+        "2 x (500 + 1000) and 2 x (1000 + 2000) sweeps gave the same MAP and "
+        "leave-one-run-out RMSE.",
         500,
         default=500,
         ge=0,
     )
-    samples: int = field_doc("Hyperparameter MCMC sweeps kept per chain.", 1000, default=1000, ge=1)
+    samples: int = field_doc(
+        "Hyperparameter draws kept: MCMC sweeps per chain (training = 'mcmc') or draws "
+        "from the Laplace approximation (training = 'map').",
+        1000,
+        default=1000,
+        ge=1,
+    )
     algebra: Literal["kronecker", "dense"] = field_doc(
         "Linear algebra: fast Kronecker or the dense reference.", "dense", default="kronecker"
     )

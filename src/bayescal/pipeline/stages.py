@@ -82,7 +82,9 @@ class Options:
     scheduler
         Dask scheduler address (implies the dask backend).
     chains_backend
-        ``"processes"`` (MCMC chains in parallel) or ``"serial"``.
+        ``"auto"`` (lockstep groups or worker processes, whichever the target
+        suits; the discrepancy phase takes ``"processes"``), ``"processes"``
+        (MCMC chains in parallel) or ``"serial"``.
     progress
         Factory of a simulation progress callback: ``total -> (progress, close)``
         (see :func:`bayescal.cli.progress.simulation_bar`), called only when runs are due.
@@ -96,7 +98,7 @@ class Options:
     backend: str | None = None
     jobs: int | None = None
     scheduler: str | None = None
-    chains_backend: str = "processes"
+    chains_backend: str = "auto"
     progress: Callable[[int], tuple[Progress, Callable[[], None]]] | None = None
     mcmc_progress: Callable[[str, int], tuple[Tick, Callable[[], None]]] | None = None
     checkpoint_seconds: float = 30.0
@@ -256,6 +258,7 @@ def build_emulator(
     try:
         emulator = train(
             assembled,
+            method=section.training,
             n_burn=section.burn,
             n_draws=section.samples,
             n_chains=n_chains,
@@ -342,11 +345,16 @@ def discrepancy_stage(ctx: Context, em: EmulatorResult, posterior: Posterior) ->
             n_burn=n_burn,
             n_draws=n_draws,
             seed=ctx.seed("discrepancy"),
-            backend=ctx.options.chains_backend,  # type: ignore[arg-type]
+            backend=_plain_backend(ctx.options.chains_backend),  # type: ignore[arg-type]
             callback=tick,
         )
     finally:
         close()
+
+
+def _plain_backend(backend: str) -> str:
+    """``"auto"`` as ``"processes"``, for a stage that chooses no backend itself."""
+    return "processes" if backend == "auto" else backend
 
 
 @dataclass(frozen=True)
