@@ -15,8 +15,10 @@ def _ar1_corr(n: int, phi: float) -> np.ndarray:
     return phi ** np.abs(i[:, None] - i[None, :])
 
 
-@pytest.mark.parametrize(("model", "phi", "discrepancy"), [("white", 0.0, False),
-                         ("ar1", 0.7, False), ("white", 0.0, True), ("ar1", -0.4, True)])  # fmt: skip
+CASES = [("white", 0.0, False), ("ar1", 0.7, False), ("white", 0.0, True), ("ar1", -0.4, True)]
+
+
+@pytest.mark.parametrize(("model", "phi", "discrepancy"), CASES)
 def test_period_density_is_the_gaussian_of_the_samples(
     model: str, phi: float, discrepancy: bool
 ) -> None:

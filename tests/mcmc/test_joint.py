@@ -103,7 +103,8 @@ def test_joint_move_samples_the_ridge_and_mixes() -> None:
     ess_plain = float(az.ess(plain.draws[:, :, 0], method="bulk"))
     assert ess_joint > 5.0 * ess_plain, (ess_joint, ess_plain)
     cov = joint.results[0].proposal_cov
-    assert cov is not None and cov.shape == (2, 2)
+    assert cov is not None
+    assert cov.shape == (2, 2)
     # The learnt proposal follows the ridge: its correlation is close to RHO.
     assert cov[0, 1] / math.sqrt(cov[0, 0] * cov[1, 1]) > 0.95
 
@@ -123,7 +124,8 @@ def test_one_chain_and_lockstep_take_the_same_draws() -> None:
     np.testing.assert_array_equal(lockstep.draws, serial.draws)
     np.testing.assert_array_equal(lockstep.log_density, serial.log_density)
     for got, want in zip(lockstep.results, serial.results, strict=True):
-        assert got.proposal_cov is not None and want.proposal_cov is not None
+        assert got.proposal_cov is not None
+        assert want.proposal_cov is not None
         np.testing.assert_array_equal(got.proposal_cov, want.proposal_cov)
 
 

@@ -21,6 +21,8 @@ from bayescal.errors import BayescalError
 
 F = TypeVar("F", bound=Callable[..., Any])
 EXIT_USER_ERROR = 2
+#: ``bayescal run --strict``: an MCMC diagnostic failed (results written all the same).
+EXIT_DIAGNOSTICS = 3
 
 
 def user_errors(command: F) -> F:
@@ -185,6 +187,13 @@ def init(example: str | None, directory: Path | None, force: bool) -> None:
 )
 @click.option("--scheduler", default=None, help="Dask scheduler address (implies --backend dask).")
 @click.option("--quiet", "-q", is_flag=True, help="No progress bars or notes; errors only.")
+@click.option(
+    "--strict",
+    is_flag=True,
+    help="Exit with status 3 when an MCMC diagnostic failed (R-hat > 1.01, bulk or tail "
+    "ESS < 400, stuck chains, divergences) in the calibration or the difference process; "
+    "the results are written all the same.",
+)
 @user_errors
 def run(
     study: Path,
@@ -194,6 +203,7 @@ def run(
     backend: str | None,
     scheduler: str | None,
     quiet: bool,
+    strict: bool,
 ) -> None:
     """Calibrate: design, simulate, emulator, calibrate, discrepancy, predict, report.
 
@@ -219,6 +229,15 @@ def run(
         click.echo(describe(res))
         if res.report is not None:
             click.echo(f"report: {res.report}")
+    failed = res.diagnostic_warnings()
+    if strict and failed:
+        click.echo(
+            f"error: {len(failed)} MCMC diagnostic(s) failed (--strict): {failed[0]}"
+            + (f" (and {len(failed) - 1} more, see bayescal.log)" if len(failed) > 1 else "")
+            + "; run longer chains ([calibration] / [discrepancy] burn and samples)",
+            err=True,
+        )
+        raise SystemExit(EXIT_DIAGNOSTICS)
 
 
 @main.command()
