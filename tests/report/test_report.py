@@ -158,6 +158,7 @@ def test_report_has_every_section_and_embeds_every_figure(full_report: Path) -> 
     text = full_report.read_text(encoding="utf-8")
     for title in SECTIONS:
         assert f"<h2>{title}</h2>" in text, title
+    assert "The test window is read only for these final metrics" in text
     # Posterior (3) + emulator (3) figures, and per output: fit, fit with Delta, Delta vs BC.
     images = _images(text)
     assert len(images) == 8 + 3

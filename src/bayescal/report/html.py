@@ -487,7 +487,9 @@ METRIC_NOTE = (
     "under-predicts. Coverage is the share of measured samples inside the 95 % band "
     "(not defined for the nominal model). “Meets Guideline 14” checks the hourly criteria "
     "CV(RMSE) ≤ 30 % and |NMBE| ≤ 10 %, written for whole-building energy use and shown "
-    "for orientation only.</p>"
+    "for orientation only. The test window is read only for these final metrics: "
+    "parameters, priors and error models are chosen on the training periods "
+    "(<code>bayescal compare</code>, leave-one-period-out cross-validation).</p>"
 )
 
 
