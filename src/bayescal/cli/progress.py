@@ -230,8 +230,9 @@ def comparison_text(table: Any, notes: Sequence[str], files: Mapping[str, Any]) 
     """The ranking of ``bayescal compare``: table, verdicts, notes and the files written."""
     from bayescal.report.compare import SMALL_DIFFERENCE, verdict
 
+    width = max(20, 1 + max(len(str(v)) for v in table["variant"]))
     head = (
-        f"{'rank':>4}  {'variant':<20}{'ELPD':>11}{'SE':>8}{'diff':>10}{'SE diff':>9}"
+        f"{'rank':>4}  {'variant':<{width}}{'ELPD':>11}{'SE':>8}{'diff':>10}{'SE diff':>9}"
         f"{'p_loo':>8}{'k>0.7':>7}{'refits':>7}"
     )
     lines = [
@@ -241,7 +242,7 @@ def comparison_text(table: Any, notes: Sequence[str], files: Mapping[str, Any]) 
     ]
     for _, r in table.iterrows():
         lines.append(
-            f"{int(r['rank']):>4}  {str(r['variant'])[:19]:<20}{r['elpd']:>11.1f}{r['se']:>8.1f}"
+            f"{int(r['rank']):>4}  {str(r['variant']):<{width}}{r['elpd']:>11.1f}{r['se']:>8.1f}"
             f"{r['elpd_diff']:>10.1f}{r['se_diff']:>9.1f}{r['p_loo']:>8.1f}"
             f"{int(r['k_high']):>7}{int(r['refits']):>7}"
         )
