@@ -242,7 +242,7 @@ def comparison_text(table: Any, notes: Sequence[str], files: Mapping[str, Any]) 
     ]
     for _, r in table.iterrows():
         lines.append(
-            f"{int(r['rank']):>4}  {str(r['variant']):<{width}}{r['elpd']:>11.1f}{r['se']:>8.1f}"
+            f"{int(r['rank']):>4}  {r['variant']!s:<{width}}{r['elpd']:>11.1f}{r['se']:>8.1f}"
             f"{r['elpd_diff']:>10.1f}{r['se_diff']:>9.1f}{r['p_loo']:>8.1f}"
             f"{int(r['k_high']):>7}{int(r['refits']):>7}"
         )
