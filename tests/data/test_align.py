@@ -78,6 +78,18 @@ def test_iana_zone_and_suggestion() -> None:
         parse_time_zone("UTC+15:00")
 
 
+def test_zone_abbreviations_get_the_zones_they_mean() -> None:
+    """'CST' once got "did you mean 'UCT'": an abbreviation now names its usual zones."""
+    with pytest.raises(ValueError, match="abbreviation") as info:
+        parse_time_zone("CST")
+    message = str(info.value)
+    assert "'America/Chicago'" in message
+    assert "'UTC-06:00'" in message
+    assert "UCT" not in message
+    with pytest.raises(ValueError, match="did you mean 'Europe/Brussels'"):
+        parse_time_zone("brussels")
+
+
 # --------------------------------------------------------------------------- index checks
 
 

@@ -135,7 +135,12 @@ class DataSection(Section):
 
     @model_validator(mode="before")
     @classmethod
-    def _infer_format(cls, data: Any) -> Any:
+    def _infer_format(cls, data: Any, info: ValidationInfo) -> Any:
+        if isinstance(data, dict) and isinstance(data.get("file"), str):
+            try:  # a path that leaves the study folder is refused as such, before its format
+                resolve_path(Path(data["file"]), info, "a file name")
+            except ValueError as exc:
+                raise_problems([f"data.file: {exc}"])
         if isinstance(data, dict) and "format" not in data and isinstance(data.get("file"), str):
             suffix = Path(data["file"]).suffix.lower()
             if suffix not in _EXTENSIONS:

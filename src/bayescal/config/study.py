@@ -571,7 +571,7 @@ def load_study(path: str | os.PathLike[str]) -> Study:
         what = f"no {STUDY_FILE} in folder {given}" if given.is_dir() else "file not found"
         raise ConfigError(what, hint="give the study file or its folder", source=str(file))
     try:
-        raw = tomllib.loads(file.read_bytes().decode("utf-8"))
+        raw = tomllib.loads(_study_text(file.read_bytes()))
     except UnicodeDecodeError as exc:
         raise ConfigError(f"not UTF-8 text (byte {exc.start})", source=str(file)) from None
     except tomllib.TOMLDecodeError as exc:
@@ -579,6 +579,14 @@ def load_study(path: str | os.PathLike[str]) -> Study:
     study = study_from_dict(raw, root=file.resolve().parent, source=str(file))
     study._path = file.resolve()
     return study
+
+
+def _study_text(data: bytes) -> str:
+    """The text of a study file: UTF-8, with or without the byte-order mark that Windows
+    editors write; UTF-16 with its byte-order mark (Notepad's "Unicode") too."""
+    if data.startswith((b"\xff\xfe", b"\xfe\xff")):
+        return data.decode("utf-16")
+    return data.decode("utf-8-sig")
 
 
 def study_from_dict(raw: dict[str, Any], *, root: Path, source: str = STUDY_FILE) -> Study:
