@@ -40,6 +40,7 @@ PRESETS: dict[str, str] = {name: p["data"] for name, p in MANIFEST["preset"].ite
 EXTENSIONS = {"csv": "csv", "parquet": "parquet", "modelica": "txt", "epw": "epw"}
 ZONE = "UTC-06:00"  # the wall example's data.time_zone
 EPOCH = pd.Timestamp("2013-01-12T00:00:00")  # first local time of the wall data
+UNIX = pd.Timestamp("1970-01-01")
 
 
 @dataclass(frozen=True)
@@ -59,9 +60,11 @@ class Case:
     write_hex: dict[str, str] = field(default_factory=dict)
     mkdir: list[str] = field(default_factory=list)
     remove: list[str] = field(default_factory=list)
+    study_encoding: str = "utf-8"
 
 
 CASES = [Case(**entry) for entry in MANIFEST["case"]]
+GOOD = [Case(where="", **entry) for entry in MANIFEST["good"]]
 
 
 # --------------------------------------------------------------------------- the data table
@@ -97,6 +100,16 @@ def _apply_frame(table: pd.DataFrame, ops: list[dict[str, Any]]) -> pd.DataFrame
             table.iloc[rows, 0] = times.dt.strftime("%Y-%m-%d %H:%M").to_numpy()
         elif kind == "suffix":
             table.iloc[rows, 0] = (table["time"].iloc[rows] + op["text"]).to_numpy()
+        elif kind == "epoch":  # local times of the wall's zone -> seconds since 1970 UTC
+            utc = pd.to_datetime(table["time"]) + pd.Timedelta(hours=6)  # ZONE is UTC-06:00
+            table["time"] = (utc - UNIX).dt.total_seconds().astype(int).astype(str)
+        elif kind == "jitter":  # a logger clock wandering by up to ±seconds
+            rng = np.random.default_rng(op["seed"])
+            shift = pd.to_timedelta(
+                rng.integers(-op["seconds"], op["seconds"] + 1, len(table)), "s"
+            )
+            times = pd.to_datetime(table["time"]) + shift
+            table["time"] = times.dt.strftime("%Y-%m-%d %H:%M:%S").to_numpy()
         else:
             raise AssertionError(f"unknown frame op {kind!r}")
         table = table.reset_index(drop=True)
@@ -180,6 +193,8 @@ def _apply_bytes(path: Path, ops: list[dict[str, Any]]) -> None:
             data = data[: int(len(data) * op["at"])]
         elif op["op"] == "garbage":
             data = np.random.default_rng(len(data)).bytes(op["n"])
+        elif op["op"] == "encode":  # the text saved in another encoding (Excel's UTF-16)
+            data = data.decode("utf-8").encode(op["encoding"])
         else:
             raise AssertionError(f"unknown bytes op {op['op']!r}")
     path.write_bytes(data)
@@ -205,7 +220,7 @@ def build_study(case: Case, tmp_path: Path) -> Path:
     for old, new in case.study:
         assert old in toml, f"{case.id}: {old!r} is not in study.toml"
         toml = toml.replace(old, new)
-    (folder / "study.toml").write_text(toml, encoding="utf-8")
+    (folder / "study.toml").write_text(toml, encoding=case.study_encoding)
     table = _apply_frame(_wall_table(), case.frame)
     if case.preset == "parquet":
         _write_parquet(table, data)
@@ -272,6 +287,18 @@ def test_bad_input_gives_one_clear_line(case: Case, tmp_path: Path) -> None:
     for fragment in case.expect:
         assert fragment in err, f"{fragment!r} not in {err}"
     assert _files(folder) == before, "files were written into the study folder"
+
+
+@pytest.mark.parametrize("case", GOOD, ids=[c.id for c in GOOD])
+def test_inputs_users_produce_that_are_accepted(case: Case, tmp_path: Path) -> None:
+    """What real users produce and bayescal reads (``[[good]]`` in the manifest): the
+    command succeeds and says what it did with the input."""
+    folder = build_study(case, tmp_path)
+    code, out, err = run_cli(case.args, folder)
+    assert code == 0, err
+    assert "training periods" in out
+    for fragment in case.expect:
+        assert fragment in out, f"{fragment!r} not in {out}"
 
 
 def test_debug_flag_shows_the_traceback_instead(tmp_path: Path) -> None:

@@ -50,7 +50,7 @@ def study_summary(study: Any, measured: Any) -> str:
         f"{measured.n} samples ({format_duration(measured.n * step)})",
         f"periods: warm-up {first} samples, {lay.m_star} training periods of {lay.period} "
         "samples"
-        + (f" ({dropped} more dropped: missing outputs)" if dropped else "")
+        + (f" ({dropped} more dropped: missing data)" if dropped else "")
         + f", test window {lay.test} samples",
     ]
     gaps = measured.gaps
@@ -58,12 +58,23 @@ def study_summary(study: Any, measured: Any) -> str:
         lines.append("gaps: none")
     else:
         filled = sum(g.interpolated for g in gaps)
+        bridged = [g for g in gaps if g.bridged]
         lines.append(
-            f"gaps: {len(gaps)} ({filled} interpolated, {len(gaps) - filled} left missing)"
+            f"gaps: {len(gaps)} ({filled} interpolated, {len(gaps) - filled} left missing"
+            + (f", {len(bridged)} of them in boundary conditions" if bridged else "")
+            + ")"
         )
-        lines += [f"  {g.describe()}" for g in gaps[:20]]
+        zone = getattr(measured, "zone", None)
+        lines += [f"  {g.describe(zone)}" for g in gaps[:20]]
         if len(gaps) > 20:
             lines.append(f"  ... and {len(gaps) - 20} more")
+        if bridged:
+            longest = format_duration(max(g.length for g in bridged))
+            lines.append(
+                "  boundary conditions are bridged linearly over their gaps for the simulator "
+                "and the periods the gaps touch are dropped; data.max_gap_interpolate = "
+                f"'{longest}' interpolates them instead and keeps the periods"
+            )
     return "\n".join(lines)
 
 
