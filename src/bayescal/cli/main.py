@@ -62,13 +62,16 @@ def validate(study: Path) -> None:
 
     STUDY is study.toml or the folder holding it.
     """
-    from bayescal.cli.progress import study_summary
+    from bayescal.cli.progress import budget_line, study_summary
     from bayescal.config import load_study
     from bayescal.data import load_measured
+    from bayescal.pipeline import check_budget
 
     config = load_study(study)
     measured = load_measured(config)
+    needs = check_budget(config, measured)
     click.echo(study_summary(config, measured))
+    click.echo(budget_line(needs))
 
 
 def _parse_assignments(values: tuple[str, ...]) -> dict[str, float]:

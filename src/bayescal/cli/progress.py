@@ -20,7 +20,14 @@ from bayescal.runner import Progress
 if TYPE_CHECKING:
     from bayescal.pipeline import Results
 
-__all__ = ["describe", "mcmc_bar", "metrics_text", "progress_options", "study_summary"]
+__all__ = [
+    "budget_line",
+    "describe",
+    "mcmc_bar",
+    "metrics_text",
+    "progress_options",
+    "study_summary",
+]
 
 Tick = Callable[[int], None]
 
@@ -76,6 +83,19 @@ def study_summary(study: Any, measured: Any) -> str:
                 f"'{longest}' interpolates them instead and keeps the periods"
             )
     return "\n".join(lines)
+
+
+def budget_line(needs: Any) -> str:
+    """``needs: about 21 MiB of memory, 12 MiB of disk (largest: simulations)``."""
+    from bayescal.pipeline.budget import format_bytes
+
+    memory = sum(need.memory for need in needs)
+    disk = sum(need.disk for need in needs)
+    largest = max(needs, key=lambda need: need.memory).what
+    return (
+        f"needs: about {format_bytes(memory)} of memory, {format_bytes(disk)} of disk "
+        f"(largest: {largest}; limits: [runner] max_memory, max_disk)"
+    )
 
 
 def _simulator_line(sim: Any) -> str:

@@ -26,6 +26,7 @@ from typing import TYPE_CHECKING, Annotated, Any, Literal
 
 from pydantic import (
     BeforeValidator,
+    ByteSize,
     PrivateAttr,
     ValidationError,
     ValidationInfo,
@@ -304,6 +305,20 @@ class RunnerSection(Section):
     )
     timeout: float | None = field_doc("Time limit per run. [s]", 600.0, default=None, gt=0)
     retries: int = field_doc("Retries of a failed run.", 1, default=0, ge=0)
+    max_memory: ByteSize | None = field_doc(
+        "Memory the study may use; the estimate of what its sizes imply (runs, record, "
+        "samples, basis) is refused beyond it, before anything is allocated. Default: "
+        "BAYESCAL_MAX_MEMORY if set, else this machine's memory. [B]",
+        "64GiB",
+        default=None,
+    )
+    max_disk: ByteSize | None = field_doc(
+        "Disk the output folder may fill; the estimate of what the study writes is refused "
+        "beyond it. Default: BAYESCAL_MAX_DISK if set, else the free space of the output "
+        "folder's file system plus what the folder holds. [B]",
+        "2TiB",
+        default=None,
+    )
 
     @model_validator(mode="after")
     def _scheduler_for_dask(self) -> RunnerSection:

@@ -28,6 +28,7 @@ from bayescal.config import Study
 from bayescal.design import Design
 from bayescal.discrepancy import Discrepancy
 from bayescal.errors import ConfigError
+from bayescal.pipeline.budget import check_budget
 from bayescal.pipeline.keys import stage_keys
 from bayescal.pipeline.stages import (
     Context,
@@ -344,6 +345,7 @@ def run(
         if value is not None and value not in STAGES:
             raise ConfigError(f"{name} must be one of {', '.join(STAGES)}, got {value!r}")
     ctx = prepare(study, options)
+    check_budget(study, ctx.measured, ctx.out)  # before any stage allocates
     r = _Runner(ctx, from_stage, say or (lambda _: None))
     r.logger.info("bayescal run of %s (config %s)", study.path, study.config_hash()[:12])
     res = Results(ctx)
