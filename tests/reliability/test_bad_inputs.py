@@ -31,6 +31,7 @@ from bayescal.emulator.assemble import assemble
 from bayescal.emulator.basis import pca_basis
 from bayescal.errors import DataError
 from bayescal.periods import layout_periods
+from faults import refuse_writes
 from paths import REPO
 
 HERE = Path(__file__).resolve().parent
@@ -61,6 +62,7 @@ class Case:
     mkdir: list[str] = field(default_factory=list)
     remove: list[str] = field(default_factory=list)
     study_encoding: str = "utf-8"
+    inject: dict[str, str] = field(default_factory=dict)
 
 
 CASES = [Case(**entry) for entry in MANIFEST["case"]]
@@ -273,9 +275,13 @@ def test_unbroken_presets_validate(preset: str, tmp_path: Path) -> None:
 
 
 @pytest.mark.parametrize("case", CASES, ids=[c.id for c in CASES])
-def test_bad_input_gives_one_clear_line(case: Case, tmp_path: Path) -> None:
+def test_bad_input_gives_one_clear_line(
+    case: Case, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
     folder = build_study(case, tmp_path)
     before = _files(folder)
+    if case.inject:
+        refuse_writes(monkeypatch, folder / case.inject["under"], case.inject["errno"])
     code, out, err = run_cli(case.args, folder)
     assert code == 2, f"exit {code}; stdout {out!r}; stderr {err!r}"
     assert out == ""

@@ -225,14 +225,14 @@ def _free_disk(folder: Path) -> tuple[int | None, int]:
     """Free bytes on the file system of ``folder`` (its nearest existing parent), and the
     bytes ``folder`` holds already."""
     probe = folder
-    while not probe.exists() and probe != probe.parent:
+    while not os.path.exists(probe) and probe != probe.parent:  # no OSError (too long)
         probe = probe.parent
     try:
         free: int | None = shutil.disk_usage(probe).free
     except OSError:
         free = None
     held = 0
-    if folder.is_dir():
+    if os.path.isdir(folder):
         for path in folder.rglob("*"):
             with contextlib.suppress(OSError):
                 held += path.stat().st_size if path.is_file() else 0

@@ -15,10 +15,12 @@ whichever stage it stopped.
 
 from __future__ import annotations
 
+import contextlib
 import logging
+import os
 import shutil
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -52,9 +54,10 @@ from bayescal.store import emulator as emulator_store
 from bayescal.store import posterior as posterior_store
 from bayescal.store import predictions as predictions_store
 from bayescal.store import runs as runs_store
+from bayescal.store.folder import OutputLock, is_output_error, output_error
 from bayescal.store.stages import STAGES, StageLog
 
-__all__ = ["Results", "file_logger", "load_results", "run", "write_study_report"]
+__all__ = ["Results", "file_logger", "load_results", "run", "write_study_report", "writing"]
 
 Say = Callable[[str], None]
 #: The report page, relative to the output folder.
@@ -94,18 +97,40 @@ class Results:
         return tuple(stage for stage, value in have.items() if value is None)
 
 
+class _LogFile(logging.FileHandler):
+    """A log file that stops writing, quietly, when writing fails (a full disk): the run
+    goes on, and its next artefact reports the disk in one line. logging's own
+    handler would print a traceback for every record instead."""
+
+    failed = False
+
+    def emit(self, record: logging.LogRecord) -> None:
+        if not self.failed:
+            super().emit(record)
+
+    def handleError(self, record: logging.LogRecord) -> None:
+        self.failed = True
+
+
 def file_logger(folder: Path) -> logging.Logger:
-    """The ``bayescal`` logger, writing to ``folder/bayescal.log`` (appending)."""
+    """The ``bayescal`` logger, writing to ``folder/bayescal.log`` (appending).
+
+    Raises
+    ------
+    OSError
+        If the log file cannot be opened (the caller reports it in one line).
+    """
     logger = logging.getLogger("bayescal.run")
     logger.setLevel(logging.INFO)
     logger.propagate = False
     target = str((folder / LOG_FILE).resolve())
     for handler in list(logger.handlers):
-        if getattr(handler, "baseFilename", None) != target:
+        if getattr(handler, "baseFilename", None) != target or getattr(handler, "failed", True):
             logger.removeHandler(handler)
-            handler.close()
+            with contextlib.suppress(OSError, ValueError):  # a full disk, a closed file
+                handler.close()
     if not logger.handlers:
-        handler = logging.FileHandler(target, encoding="utf-8")
+        handler = _LogFile(target, encoding="utf-8")
         handler.setFormatter(logging.Formatter("%(asctime)s %(levelname)s %(message)s"))
         logger.addHandler(handler)
     return logger
@@ -117,7 +142,6 @@ class _Runner:
     def __init__(self, ctx: Context, force_from: str | None, say: Say) -> None:
         self.ctx = ctx
         self.out = ctx.out
-        self.out.mkdir(parents=True, exist_ok=True)
         self.log = StageLog.open(self.out)
         self.logger = file_logger(self.out)
         self.keys = stage_keys(ctx)
@@ -340,13 +364,61 @@ def run(
     Returns
     -------
     Results
+
+    Raises
+    ------
+    OutputError
+        If the output folder is in use by another run (its lock,
+        :class:`bayescal.store.folder.OutputLock`), or cannot be written
+        (permission, a full or read-only disk, a file in its place): one line
+        naming the path; what was completed stays, and a new run resumes.
     """
     for name, value in (("from_stage", from_stage), ("until", until)):
         if value is not None and value not in STAGES:
             raise ConfigError(f"{name} must be one of {', '.join(STAGES)}, got {value!r}")
     ctx = prepare(study, options)
-    check_budget(study, ctx.measured, ctx.out)  # before any stage allocates
-    r = _Runner(ctx, from_stage, say or (lambda _: None))
+    needs = check_budget(study, ctx.measured, ctx.out)  # before any stage allocates
+    tell = say or (lambda _: None)
+    with writing(ctx.out, sum(need.disk for need in needs)):
+        ctx.out.mkdir(parents=True, exist_ok=True)
+        with OutputLock(ctx.out, command="run") as lock:
+            if lock.took_over:
+                tell(lock.describe_taken_over())
+            return _run_stages(ctx, from_stage, until, tell)
+
+
+@contextlib.contextmanager
+def writing(out: Path, disk: float | None = None) -> Iterator[None]:
+    """Turn an OSError of writing ``out`` into one :class:`~bayescal.errors.OutputError`.
+
+    Parameters
+    ----------
+    out
+        The output folder.
+    disk
+        Estimated bytes the study writes in all (for a full disk, what to free). [B]
+    """
+    try:
+        yield
+    except OSError as exc:
+        if not is_output_error(exc, out):
+            raise
+        still = None if disk is None else max(0.0, disk - _held(out))
+        raise output_error(exc, out, still_needed=still) from exc
+
+
+def _held(out: Path) -> int:
+    total = 0
+    if os.path.isdir(out):
+        for path in out.rglob("*"):
+            with contextlib.suppress(OSError):
+                total += path.stat().st_size if path.is_file() else 0
+    return total
+
+
+def _run_stages(ctx: Context, from_stage: str | None, until: str, say: Say) -> Results:
+    study = ctx.study
+    r = _Runner(ctx, from_stage, say)
     r.logger.info("bayescal run of %s (config %s)", study.path, study.config_hash()[:12])
     res = Results(ctx)
     last = STAGES.index(until)
