@@ -165,6 +165,16 @@ def test_csv_epoch_seconds_and_milliseconds(tmp_path: Path) -> None:
         read_csv(FIXTURE_CSV, "time", time_format="epoch")
 
 
+def test_parquet_epoch_seconds(tmp_path: Path) -> None:
+    times = pd.date_range("2020-01-01", periods=4, freq="30min", tz="UTC")
+    seconds = (times - pd.Timestamp("1970-01-01", tz="UTC")).total_seconds().astype("int64")
+    pd.DataFrame({"t": seconds, "x": [1.0, 2.0, 3.0, 4.0]}).to_parquet(tmp_path / "e.parquet")
+    frame = read_parquet(tmp_path / "e.parquet", "t", time_format="epoch")
+    assert (frame.index == times).all()
+    with pytest.raises(DataError, match=r"set data\.time_format = 'epoch'"):
+        read_parquet(tmp_path / "e.parquet", "t")
+
+
 def test_row_labels_travel_with_the_frame(tmp_path: Path) -> None:
     frame = read_csv(FIXTURE_CSV, "time")
     labels = frame.attrs["rows"]
