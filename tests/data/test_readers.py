@@ -285,6 +285,8 @@ def test_epw_hour_ending_time_zone_typical_year_and_missing_codes(tmp_path: Path
     [
         ("LOCATION,x\n", "not an EPW LOCATION line"),
         (_epw([], tz="one"), "time zone 'one' is not a number"),
+        (_epw([], tz="50.8"), r"time zone '50.8' is not a UTC offset"),  # found by fuzzing
+        (_epw([], tz="nan"), r"time zone 'nan' is not a UTC offset"),
         (_epw([]), "no data rows"),
         (_epw([_row(2019, 1, 1, 1, "1"), "2019,1,1,2,60"]), r"line 10 has 5 fields"),
         (_epw([_row(2019, 1, 1, 25, "1")]), r"line 9: date or time field out of range"),

@@ -83,6 +83,11 @@ class RowLabels:
     lines: np.ndarray
     texts: np.ndarray
 
+    def __deepcopy__(self, memo: dict[int, object]) -> RowLabels:
+        """Itself: pandas deep-copies a frame's ``attrs`` at every step, and these arrays
+        are never changed."""
+        return self
+
     def row(self, pos: int) -> str:
         """``"line 42 ('2013-01-16 04:00')"``."""
         return f"line {int(self.lines[pos])} ({str(self.texts[pos])!r})"

@@ -475,6 +475,11 @@ def _epw_zone(location: str, source: str) -> tzinfo:
         raise DataError(
             f"line 1: time zone {fields[8]!r} is not a number of hours", source=source
         ) from None
+    if not -12.0 <= hours <= 14.0:  # NaN included
+        raise DataError(
+            f"line 1: time zone {fields[8]!r} is not a UTC offset (expected -12 to +14 hours)",
+            source=source,
+        )
     return timezone(timedelta(hours=hours))
 
 
