@@ -21,7 +21,9 @@ atomic on one volume):
    where folders cannot be opened, i.e. on Windows).
 
 If anything fails before step 3 the temporary file is removed and the
-exception propagates; the final name keeps its previous content, if any.
+exception propagates; the final name keeps its previous content, if any. An
+:class:`OSError` (a full disk, a read-only folder) names the final path, not
+the temporary one, whatever step raised it.
 
 The new file gets the permissions a plain ``open()`` would give it (``0666``
 less the umask), not the ``0600`` of :func:`tempfile.mkstemp`. Libraries that
@@ -99,6 +101,18 @@ def _temporary(final: Path) -> tuple[int, str]:
 
 
 @contextlib.contextmanager
+def _naming(final: Path) -> Iterator[None]:
+    """Re-raise an OSError of writing ``final`` with ``final`` as its file name (a write
+    on a full disk names no file; mkstemp names the temporary one)."""
+    try:
+        yield
+    except OSError as exc:
+        if exc.errno is None or exc.filename == str(final):
+            raise
+        raise OSError(exc.errno, exc.strerror, str(final)) from exc
+
+
+@contextlib.contextmanager
 def _removed_on_error(temp_name: str) -> Iterator[None]:
     """Remove the temporary file if the block raises (anything, KeyboardInterrupt too)."""
     try:
@@ -131,12 +145,14 @@ def atomic_write(path: str | os.PathLike[str], write: Callable[[IO[bytes]], None
         The final path.
     """
     final = Path(path)
-    fd, temp_name = _temporary(final)
-    with _removed_on_error(temp_name), os.fdopen(fd, "wb") as stream:
-        write(stream)
-        stream.flush()
-        os.fsync(stream.fileno())
-    return _commit(temp_name, final)
+    with _naming(final):
+        fd, temp_name = _temporary(final)
+        with _removed_on_error(temp_name):
+            with os.fdopen(fd, "wb") as stream:
+                write(stream)
+                stream.flush()
+                os.fsync(stream.fileno())
+            return _commit(temp_name, final)
 
 
 def atomic_write_path(path: str | os.PathLike[str], write: Callable[[Path], None]) -> Path:
@@ -159,15 +175,16 @@ def atomic_write_path(path: str | os.PathLike[str], write: Callable[[Path], None
         The final path.
     """
     final = Path(path)
-    fd, temp_name = _temporary(final)
-    os.close(fd)
-    with _removed_on_error(temp_name):
-        mode = os.stat(temp_name).st_mode
-        write(Path(temp_name))
-        os.chmod(temp_name, mode)  # a library that recreated the file gets the mode back
-        with open(temp_name, "rb") as stream:
-            os.fsync(stream.fileno())
-    return _commit(temp_name, final)
+    with _naming(final):
+        fd, temp_name = _temporary(final)
+        os.close(fd)
+        with _removed_on_error(temp_name):
+            mode = os.stat(temp_name).st_mode
+            write(Path(temp_name))
+            os.chmod(temp_name, mode)  # a library that recreated the file gets the mode back
+            with open(temp_name, "rb") as stream:
+                os.fsync(stream.fileno())
+            return _commit(temp_name, final)
 
 
 def atomic_write_bytes(path: str | os.PathLike[str], data: bytes) -> Path:

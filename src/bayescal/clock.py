@@ -89,9 +89,65 @@ def parse_time_zone(text: str) -> tzinfo:
     try:
         return ZoneInfo(name)
     except (ZoneInfoNotFoundError, ValueError, OSError):  # OSError: "Europe" is a folder
-        close = difflib.get_close_matches(name, sorted(available_timezones()), n=3)
-        hint = f"; did you mean {', '.join(map(repr, close))}?" if close else ""
+        pass
+    if name.upper() in _ABBREVIATIONS:
+        meanings = "; ".join(
+            f"{what} is {zone!r} or 'UTC{offset}'"
+            if season == _NO
+            else f"{what} is {zone!r} ({season}) or 'UTC{offset}' (all year)"
+            for what, zone, season, offset in _ABBREVIATIONS[name.upper()]
+        )
         raise ValueError(
-            f"unknown time zone {text!r}: expected an IANA name such as 'Europe/Brussels' "
-            f"or a fixed offset such as 'UTC+01:00'{hint}"
-        ) from None
+            f"unknown time zone {text!r}: an abbreviation names no single zone; {meanings}"
+        )
+    raise ValueError(
+        f"unknown time zone {text!r}: expected an IANA name such as 'Europe/Brussels' "
+        f"or a fixed offset such as 'UTC+01:00'{_zone_hint(name)}"
+    )
+
+
+def _zone_hint(name: str) -> str:
+    """``"; did you mean 'America/Chicago'?"``: regional IANA names close to ``name``, or
+    those whose city is ``name`` (legacy aliases such as 'UCT' are not suggested)."""
+    regional = sorted(z for z in available_timezones() if "/" in z and not z.startswith("Etc/"))
+    cities = {z.rsplit("/", 1)[-1].lower(): z for z in regional}
+    key = name.replace(" ", "_").lower()
+    close = [cities[key]] if key in cities else []
+    close += difflib.get_close_matches(name, regional, n=3)
+    close = list(dict.fromkeys(close))[:3]
+    return f"; did you mean {', '.join(map(repr, close))}?" if close else ""
+
+
+_S, _D, _NO = "with its daylight saving", "daylight time in summer", "no daylight saving"
+_ABBREVIATIONS: dict[str, tuple[tuple[str, str, str, str], ...]] = {
+    # abbreviation -> (what it usually means, IANA zone, note, offset of the abbreviation)
+    "CST": (
+        ("US Central Standard Time", "America/Chicago", _D, "-06:00"),
+        ("China Standard Time", "Asia/Shanghai", _NO, "+08:00"),
+    ),
+    "CDT": (("US Central Daylight Time", "America/Chicago", _S, "-05:00"),),
+    "EDT": (("US Eastern Daylight Time", "America/New_York", _S, "-04:00"),),
+    "MDT": (("US Mountain Daylight Time", "America/Denver", _S, "-06:00"),),
+    "PST": (("US Pacific Standard Time", "America/Los_Angeles", _D, "-08:00"),),
+    "PDT": (("US Pacific Daylight Time", "America/Los_Angeles", _S, "-07:00"),),
+    "AKST": (("Alaska Standard Time", "America/Anchorage", _D, "-09:00"),),
+    "CEST": (("Central European Summer Time", "Europe/Brussels", _S, "+02:00"),),
+    "BST": (("British Summer Time", "Europe/London", _S, "+01:00"),),
+    "WEST": (("Western European Summer Time", "Europe/Lisbon", _S, "+01:00"),),
+    "EEST": (("Eastern European Summer Time", "Europe/Athens", _S, "+03:00"),),
+    "IST": (
+        ("India Standard Time", "Asia/Kolkata", _NO, "+05:30"),
+        ("Irish Standard Time", "Europe/Dublin", _S, "+01:00"),
+    ),
+    "JST": (("Japan Standard Time", "Asia/Tokyo", _NO, "+09:00"),),
+    "KST": (("Korea Standard Time", "Asia/Seoul", _NO, "+09:00"),),
+    "AEST": (("Australian Eastern Standard Time", "Australia/Sydney", _D, "+10:00"),),
+    "AEDT": (("Australian Eastern Daylight Time", "Australia/Sydney", _S, "+11:00"),),
+    "AWST": (("Australian Western Standard Time", "Australia/Perth", _NO, "+08:00"),),
+    "NZST": (("New Zealand Standard Time", "Pacific/Auckland", _D, "+12:00"),),
+    "MSK": (("Moscow Time", "Europe/Moscow", _NO, "+03:00"),),
+    "SGT": (("Singapore Time", "Asia/Singapore", _NO, "+08:00"),),
+    "BRT": (("Brasília Time", "America/Sao_Paulo", _NO, "-03:00"),),
+}
+"""Common zone abbreviations that are not IANA names (EST, MST, HST and CET are, as
+fixed zones), with the zones they usually mean."""

@@ -46,3 +46,8 @@ class DataError(BayescalError):
 
 class SimulatorError(BayescalError):
     """A simulator could not be built or a run failed."""
+
+
+class OutputError(BayescalError):
+    """The output folder cannot be written (permission, full or read-only disk, a file in
+    its place) or is in use by another run."""

@@ -71,12 +71,16 @@ def test_data_error_and_gap_report(tmp_path: Path) -> None:
     code, out, _ = _run("validate", str(folder))
     assert code == 0
     assert "gaps: 1 (0 interpolated, 1 left missing)" in out
-    assert "3 training periods of 48 samples (1 more dropped: missing outputs)" in out
-    frame.loc[10, "T_se"] = float("nan")
+    assert "3 training periods of 48 samples (1 more dropped: missing data)" in out
+    frame.loc[10, "T_se"] = float("nan")  # one missing boundary value, in the warm-up
     frame.to_csv(folder / "wall.csv", index=False)
-    code, _, err = _run("validate", str(folder))
-    assert code == 2
-    assert "boundary condition(s) temp_surf_out missing" in err
+    code, out, _ = _run("validate", str(folder))
+    assert code == 0
+    assert "gaps: 2 (0 interpolated, 2 left missing, 1 of them in boundary conditions)" in out
+    # local times of the study's zone, and the line of the file
+    assert "2012-02-01 05:00 – 2012-02-01 05:00 UTC+01:00" in out
+    assert "file line 12" in out
+    assert "data.max_gap_interpolate = '30min' interpolates them instead" in out
 
 
 def test_debug_shows_the_traceback(tmp_path: Path) -> None:

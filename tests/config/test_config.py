@@ -309,6 +309,48 @@ def test_toml_syntax_error_names_file_and_line(tmp_path: Path) -> None:
         load_study(tmp_path)
 
 
+@pytest.mark.parametrize("encoding", ["utf-8-sig", "utf-16"])
+def test_a_study_file_with_a_byte_order_mark_loads(tmp_path: Path, encoding: str) -> None:
+    """Windows editors write a BOM (Notepad's "Unicode" is UTF-16): the study reads."""
+    folder = tmp_path / "study"
+    shutil.copytree(FIXTURE, folder)
+    text = (folder / "study.toml").read_text(encoding="utf-8")
+    (folder / "study.toml").write_bytes(text.encode(encoding))
+    assert load_study(folder).config_hash() == load_study(FIXTURE).config_hash()
+
+
+@pytest.mark.parametrize(
+    ("key", "value", "match"),
+    [
+        ("runs", "30", r"design\.runs: expected a number, got the text '30'"),
+        ("runs", 30.0, r"design\.runs: expected a whole number .*got 30\.0"),
+        ("runs", True, r"design\.runs: expected a number, got true"),
+        ("seed", 1.5, r"design\.seed: expected a whole number"),
+    ],
+)
+def test_integers_are_integers(key: str, value: object, match: str) -> None:
+    with pytest.raises(ConfigError, match=match):
+        _validate(lambda raw: raw.setdefault("design", {}).__setitem__(key, value))
+
+
+def test_numbers_in_lists_and_tables_are_strict() -> None:
+    def edit(raw: dict[str, Any]) -> None:
+        raw["parameters"]["k_cb"]["nominal"] = "0.12"
+        raw["simulator"]["layers"][0]["thickness"] = "0.027"
+
+    with pytest.raises(ConfigError) as info:
+        _validate(edit)
+    assert "parameters.k_cb.nominal: expected a number, got the text '0.12'" in str(info.value)
+    assert "simulator.layers[0].thickness: expected a number" in str(info.value)
+    # whole numbers stay good floats, and numpy integers good integers
+    import numpy as np
+
+    study = _validate(lambda raw: raw["design"].__setitem__("runs", np.int64(12)))
+    assert study.design.runs == 12
+    study = _validate(lambda raw: raw["parameters"]["cp_cb"].__setitem__("nominal", 800))
+    assert study.parameters["cp_cb"].nominal == 800.0
+
+
 def test_missing_study(tmp_path: Path) -> None:
     with pytest.raises(ConfigError, match=r"no study\.toml in folder"):
         load_study(tmp_path)

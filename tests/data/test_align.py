@@ -13,6 +13,7 @@ import pytest
 from bayescal.clock import format_duration, parse_duration, parse_time_zone
 from bayescal.config import load_study
 from bayescal.data.align import (
+    RowLabels,
     align,
     check_index,
     fill_gaps,
@@ -78,6 +79,18 @@ def test_iana_zone_and_suggestion() -> None:
         parse_time_zone("UTC+15:00")
 
 
+def test_zone_abbreviations_get_the_zones_they_mean() -> None:
+    """'CST' once got "did you mean 'UCT'": an abbreviation now names its usual zones."""
+    with pytest.raises(ValueError, match="abbreviation") as info:
+        parse_time_zone("CST")
+    message = str(info.value)
+    assert "'America/Chicago'" in message
+    assert "'UTC-06:00'" in message
+    assert "UCT" not in message
+    with pytest.raises(ValueError, match="did you mean 'Europe/Brussels'"):
+        parse_time_zone("brussels")
+
+
 # --------------------------------------------------------------------------- index checks
 
 
@@ -90,9 +103,19 @@ def test_check_index_reports_lines() -> None:
 
 
 def test_localize_ambiguous_local_time() -> None:
-    times = pd.DatetimeIndex(["2013-10-27 02:30"])
-    with pytest.raises(DataError, match="ambiguous"):
-        localize(times, parse_time_zone("Europe/Brussels"), "f")
+    zone = parse_time_zone("Europe/Brussels")
+    times = pd.DatetimeIndex(["2013-10-27 01:30", "2013-10-27 02:30", "2013-10-27 03:30"])
+    labels = RowLabels(np.array([7, 8, 9]), np.array(["27/10 01:30", "27/10 02:30", "x"]))
+    with pytest.raises(DataError, match=r"line 8 \('27/10 02:30'\): this local time occurs twice"):
+        localize(times, zone, "f", labels)
+    # the file holds the repeated hour twice, in order: the order tells which is which
+    twice = pd.DatetimeIndex(
+        ["2013-10-27 02:00", "2013-10-27 02:30", "2013-10-27 02:00", "2013-10-27 02:30"]
+    )
+    utc = localize(twice, zone, "f")
+    assert (np.diff(utc.as_unit("ns").asi8) == pd.Timedelta("30min").value).all()
+    with pytest.raises(DataError, match=r"does not exist.*data\.time_zone.*UTC\+01:00"):
+        localize(pd.DatetimeIndex(["2013-03-31 02:30"]), zone, "f")
     aware = localize(pd.DatetimeIndex(["2013-10-27 02:30"]), UTC1, "f")
     assert aware[0] == pd.Timestamp("2013-10-27 01:30", tz="UTC")
 
@@ -187,6 +210,58 @@ def test_start_fixes_the_grid_and_end_is_exclusive() -> None:
     assert out.index[0] == pd.Timestamp("2020-01-01 00:45", tz="UTC")
     assert out.index[-1] == pd.Timestamp("2020-01-01 02:45", tz="UTC")
     np.testing.assert_array_equal(out["x"], [1.0, 2.0, 3.0, 4.0, 5.0])
+
+
+def _jittered(n: int, seed: int = 5) -> pd.DatetimeIndex:
+    """A 30-min logger whose clock wanders by up to ±4 min, to the second."""
+    jitter = np.random.default_rng(seed).integers(-240, 241, n)
+    jitter[0] = 0
+    return _utc("2020-01-01", n, "30min") + pd.to_timedelta(jitter, unit="s")
+
+
+def test_a_jittering_clock_is_detected_and_resampling_offered() -> None:
+    times = _jittered(200)
+    labels = RowLabels(np.arange(2, 202), np.array([f"{t:%d/%m %H:%M:%S}" for t in times]))
+    with pytest.raises(DataError, match=r"jitter around the study step 30min.*data\.resample"):
+        align(_frame(times, x=np.zeros(200)), STEP, zone=UTC, labels=labels)
+
+
+def test_linear_resampling_puts_a_jittering_clock_on_the_grid() -> None:
+    times = _jittered(200)
+    seconds = (times - times[0]).total_seconds().to_numpy()
+    ramp = 3.0 * seconds / 3600 + 1.0  # a ramp: linear interpolation is exact
+    x = ramp.copy()
+    x[50] = np.nan  # a missing value and a missing row: the samples around each lie
+    frame = _frame(times.delete(120), x=np.delete(x, 120))  # over 1.5 steps apart
+    out = align(frame, STEP, zone=UTC, resample="linear")
+    clock = (out.index - times[0]).total_seconds().to_numpy()
+    assert out.index[0] == times[0]
+    assert (np.diff(out.index.as_unit("ns").asi8) == STEP.value).all()
+    got = out["x"].to_numpy()
+    missing = np.isnan(got)
+    assert 2 <= missing.sum() <= 4  # the instants between those samples, 1 or 2 each
+    assert all(min(abs(c - 50 * 1800), abs(c - 120 * 1800)) <= 1800 for c in clock[missing])
+    # Tolerance: float round-off of the interpolation weights of values ~ 300.
+    np.testing.assert_allclose(got[~missing], 3.0 * clock[~missing] / 3600 + 1.0, atol=1e-9)
+
+
+def test_a_shifted_record_is_not_jitter_and_errors_show_local_times() -> None:
+    times = _utc("2020-01-01 00:15", 10, "30min")
+    labels = RowLabels(np.arange(2, 12), np.array([f"{t:%H:%M}" for t in times.tz_convert(UTC1)]))
+    with pytest.raises(DataError) as info:
+        align(_frame(times, x=np.zeros(10)), STEP, zone=UTC1, labels=labels)
+    message = str(info.value)
+    assert "timestamps line 3 ('01:45'), line 4 ('02:15')" in message
+    assert "not on the study clock (instants 2020-01-01 01:30 (UTC+01:00) + k × 30min)" in message
+    assert "data.start = '2020-01-01T01:45:00'" in message  # a local time, as data.start takes
+    with pytest.raises(DataError, match=r"data\.start 2020-01-01 00:00 \(UTC\+01:00\) is before"):
+        align(
+            _frame(times, x=np.zeros(10)),
+            STEP,
+            zone=UTC1,
+            start=pd.Timestamp("2020-01-01 00:00"),
+            labels=labels,
+        )
 
 
 # --------------------------------------------------------------------------- gaps
@@ -292,20 +367,54 @@ def test_output_gaps_are_reported_and_their_periods_dropped(tmp_path: Path) -> N
     assert measured.layout.dropped_starts.tolist() == [96]
 
 
-def test_boundary_condition_gap_is_an_error_unless_interpolated(tmp_path: Path) -> None:
+def test_a_boundary_condition_gap_drops_the_periods_it_touches(tmp_path: Path) -> None:
+    """One missing row of a boundary condition: bridged for the simulator, its period
+    dropped (what the docs say of gaps), and the setting that interpolates it named."""
+
     def hole(frame: pd.DataFrame) -> None:
-        frame.loc[100:101, "T_si"] = np.nan
+        frame.loc[100, "T_si"] = np.nan  # inside the second training period [96, 144)
 
     folder = _study_copy(tmp_path, hole)
-    with pytest.raises(DataError, match=r"temp_surf_in missing over.*max_gap_interpolate >= '1h'"):
-        load_measured(load_study(folder))
+    measured = load_measured(load_study(folder))
+    (gap,) = measured.gaps
+    assert gap.bridged
+    assert not gap.interpolated
+    assert gap.where == "file line 102"  # header, then row 0 on line 2
+    raw = pd.read_csv(FIXTURE / "wall.csv")["T_si"].to_numpy()
+    assert measured.forcing["temp_surf_in"][100] == pytest.approx((raw[99] + raw[101]) / 2)
+    assert np.isnan(measured.outputs["heat_flux_in"][100])  # measured against invented inputs
+    assert measured.layout.dropped_starts.tolist() == [96]
+    assert measured.layout.m_star == 3
+    assert "bridged for the simulator, its periods dropped" in gap.describe()
     text = (folder / "study.toml").read_text()
     (folder / "study.toml").write_text(
-        text.replace('step = "30min"', 'step = "30min"\nmax_gap_interpolate = "1h"')
+        text.replace('step = "30min"', 'step = "30min"\nmax_gap_interpolate = "30min"')
     )
     measured = load_measured(load_study(folder))
     assert measured.gaps[0].interpolated
-    assert np.isfinite(measured.forcing["temp_surf_in"]).all()
+    assert measured.layout.m_star == 4
+    assert np.isfinite(measured.outputs["heat_flux_in"]).all()
+
+
+def test_after_a_boundary_gap_longer_than_a_period_the_warm_up_is_dropped(
+    tmp_path: Path,
+) -> None:
+    def hole(frame: pd.DataFrame) -> None:
+        frame.loc[60:120, "T_se"] = np.nan  # 61 samples, over one period (48)
+
+    measured = load_measured(load_study(_study_copy(tmp_path, hole)))
+    # touched: [48, 96), [96, 144); the warm-up of 48 samples after sample 120: [144, 192)
+    assert measured.layout.dropped_starts.tolist() == [48, 96, 144]
+    assert measured.layout.train_starts.tolist() == [192]
+    assert np.isfinite(measured.forcing["temp_surf_out"]).all()
+
+
+def test_a_boundary_gap_over_every_period_is_an_error(tmp_path: Path) -> None:
+    def hole(frame: pd.DataFrame) -> None:
+        frame.loc[50:230, "T_se"] = np.nan
+
+    with pytest.raises(DataError, match=r"all 4 training periods.*data\.max_gap_interpolate"):
+        load_measured(load_study(_study_copy(tmp_path, hole)))
 
 
 def test_too_short_record(tmp_path: Path) -> None:

@@ -86,8 +86,12 @@ BAD_CSV = [
     ("time;a;b\n2020-01-01T00:00;1;2\n", {}, r"only one column.*data.delimiter = ';'"),
     ("Time,a\n2020-01-01T00:00,1\n", {}, r"no column 'time' in the file; did you mean 'Time'"),
     (GOOD_HEAD + "not a time,1,2\n", {}, r"line 3: cannot read time 'not a time'.*time_format"),
-    (GOOD_HEAD + "2020-01-01T00:30,1,2\n2020-01-01T00:20,1,2\n", {}, r"backwards at lines 4"),
-    (GOOD_HEAD + "2020-01-01T00:00,1,2\n", {}, r"duplicated timestamps 2020-01-01 00:00:00"),
+    (
+        GOOD_HEAD + "2020-01-01T00:30,1,2\n2020-01-01T00:20,1,2\n",
+        {},
+        r"backwards at line 4 \('2020-01-01T00:20'\) after line 3",
+    ),
+    (GOOD_HEAD + "2020-01-01T00:00,1,2\n", {}, r"line 3 \('2020-01-01T00:00'\) repeats line 2"),
     ("time,a,a\n2020-01-01T00:00,1,2\n", {}, "duplicated column names"),
     (GOOD_HEAD, {"columns": ["c"]}, r"no column 'c'"),
     (
@@ -98,12 +102,12 @@ BAD_CSV = [
     (
         "time,a\n2013-10-27T02:30,1\n",
         {"time_zone": parse_time_zone("Europe/Brussels")},
-        r"ambiguous.*daylight-saving.*UTC",
+        r"line 2 \('2013-10-27T02:30'\): this local time occurs twice.*UTC offsets",
     ),
     (
         "time,a\n2013-03-31T02:30,1\n",
         {"time_zone": parse_time_zone("Europe/Brussels")},
-        r"daylight-saving",
+        r"does not exist.*skip an hour on 2013-03-31",
     ),
 ]
 
@@ -124,6 +128,57 @@ def test_csv_binary_and_missing_files(tmp_path: Path) -> None:
         read_csv(binary, "time")
     with pytest.raises(DataError, match="file not found"):
         read_csv(tmp_path / "nope.csv", "time")
+
+
+@pytest.mark.parametrize("encoding", ["utf-16", "utf-16-le", "utf-16-be"])
+def test_csv_in_utf16_is_read(tmp_path: Path, encoding: str) -> None:
+    """Excel's "Unicode text" export (UTF-16, tab-separated) reads like its UTF-8 twin."""
+    text = FIXTURE_CSV.read_text(encoding="utf-8").replace(",", "\t")
+    path = tmp_path / "export.txt"
+    path.write_bytes(text.encode(encoding))
+    frame = read_csv(path, "time", time_zone=UTC1, delimiter="\t")
+    pd.testing.assert_frame_equal(frame, read_csv(FIXTURE_CSV, "time", time_zone=UTC1))
+
+
+def test_csv_in_broken_utf16_says_to_resave_as_utf8(tmp_path: Path) -> None:
+    path = tmp_path / "export.csv"
+    path.write_bytes("time,a\n".encode("utf-16") + b"\x00\xd8")  # a lone surrogate
+    with pytest.raises(DataError, match=r"UTF-16.*re-save it as UTF-8"):
+        read_csv(path, "time")
+
+
+def test_csv_epoch_seconds_and_milliseconds(tmp_path: Path) -> None:
+    expected = read_csv(FIXTURE_CSV, "time", time_zone=UTC1)
+    frame = pd.read_csv(FIXTURE_CSV)
+    local = pd.to_datetime(frame["time"]).dt.tz_localize(UTC1)
+    seconds = (local - pd.Timestamp("1970-01-01", tz="UTC")).dt.total_seconds()
+    for time_format, factor in (("epoch", 1), ("epoch_ms", 1000)):
+        frame["time"] = (seconds * factor).astype("int64")
+        path = tmp_path / f"{time_format}.csv"
+        frame.to_csv(path, index=False)
+        # the zone does not matter: Unix times are UTC
+        got = read_csv(path, "time", time_format=time_format, time_zone="Asia/Tokyo")
+        pd.testing.assert_frame_equal(got, expected, check_index_type=False)
+        with pytest.raises(DataError, match=f"set data.time_format = '{time_format}'"):
+            read_csv(path, "time")
+    with pytest.raises(DataError, match=r"line 2: cannot read time '20.*as seconds.*remove data"):
+        read_csv(FIXTURE_CSV, "time", time_format="epoch")
+
+
+def test_parquet_epoch_seconds(tmp_path: Path) -> None:
+    times = pd.date_range("2020-01-01", periods=4, freq="30min", tz="UTC")
+    seconds = (times - pd.Timestamp("1970-01-01", tz="UTC")).total_seconds().astype("int64")
+    pd.DataFrame({"t": seconds, "x": [1.0, 2.0, 3.0, 4.0]}).to_parquet(tmp_path / "e.parquet")
+    frame = read_parquet(tmp_path / "e.parquet", "t", time_format="epoch")
+    assert (frame.index == times).all()
+    with pytest.raises(DataError, match=r"set data\.time_format = 'epoch'"):
+        read_parquet(tmp_path / "e.parquet", "t")
+
+
+def test_row_labels_travel_with_the_frame(tmp_path: Path) -> None:
+    frame = read_csv(FIXTURE_CSV, "time")
+    labels = frame.attrs["rows"]
+    assert labels.row(0) == f"line 2 ({pd.read_csv(FIXTURE_CSV)['time'][0]!r})"
 
 
 # --------------------------------------------------------------------------- Parquet
@@ -185,7 +240,7 @@ BAD_TABLES = [
     ("#1\ndouble t(2,2)\n0 1,5\n60 2,5\n", r"line 3 has 3 values.*decimal commas"),
     ("#1\ndouble t(2,1)\n0\n60\n", "no data column besides time"),
     ("#1\ndouble t(2,2)\n0 1\n1e12 2\n", r"line 4: time 1000000000000.0 s is not a time"),
-    ("#1\ndouble t(2,2)\n60 1\n0 2\n", r"backwards at lines 4"),
+    ("#1\ndouble t(2,2)\n60 1\n0 2\n", r"backwards at line 4 \('0'\) after line 3 \('60'\)"),
 ]
 
 
@@ -230,6 +285,8 @@ def test_epw_hour_ending_time_zone_typical_year_and_missing_codes(tmp_path: Path
     [
         ("LOCATION,x\n", "not an EPW LOCATION line"),
         (_epw([], tz="one"), "time zone 'one' is not a number"),
+        (_epw([], tz="50.8"), r"time zone '50.8' is not a UTC offset"),  # found by fuzzing
+        (_epw([], tz="nan"), r"time zone 'nan' is not a UTC offset"),
         (_epw([]), "no data rows"),
         (_epw([_row(2019, 1, 1, 1, "1"), "2019,1,1,2,60"]), r"line 10 has 5 fields"),
         (_epw([_row(2019, 1, 1, 25, "1")]), r"line 9: date or time field out of range"),

@@ -31,6 +31,7 @@ from bayescal.emulator.assemble import assemble
 from bayescal.emulator.basis import pca_basis
 from bayescal.errors import DataError
 from bayescal.periods import layout_periods
+from faults import refuse_writes
 from paths import REPO
 
 HERE = Path(__file__).resolve().parent
@@ -40,6 +41,7 @@ PRESETS: dict[str, str] = {name: p["data"] for name, p in MANIFEST["preset"].ite
 EXTENSIONS = {"csv": "csv", "parquet": "parquet", "modelica": "txt", "epw": "epw"}
 ZONE = "UTC-06:00"  # the wall example's data.time_zone
 EPOCH = pd.Timestamp("2013-01-12T00:00:00")  # first local time of the wall data
+UNIX = pd.Timestamp("1970-01-01")
 
 
 @dataclass(frozen=True)
@@ -59,9 +61,12 @@ class Case:
     write_hex: dict[str, str] = field(default_factory=dict)
     mkdir: list[str] = field(default_factory=list)
     remove: list[str] = field(default_factory=list)
+    study_encoding: str = "utf-8"
+    inject: dict[str, str] = field(default_factory=dict)
 
 
 CASES = [Case(**entry) for entry in MANIFEST["case"]]
+GOOD = [Case(where="", **entry) for entry in MANIFEST["good"]]
 
 
 # --------------------------------------------------------------------------- the data table
@@ -97,6 +102,16 @@ def _apply_frame(table: pd.DataFrame, ops: list[dict[str, Any]]) -> pd.DataFrame
             table.iloc[rows, 0] = times.dt.strftime("%Y-%m-%d %H:%M").to_numpy()
         elif kind == "suffix":
             table.iloc[rows, 0] = (table["time"].iloc[rows] + op["text"]).to_numpy()
+        elif kind == "epoch":  # local times of the wall's zone -> seconds since 1970 UTC
+            utc = pd.to_datetime(table["time"]) + pd.Timedelta(hours=6)  # ZONE is UTC-06:00
+            table["time"] = (utc - UNIX).dt.total_seconds().astype(int).astype(str)
+        elif kind == "jitter":  # a logger clock wandering by up to ±seconds
+            rng = np.random.default_rng(op["seed"])
+            shift = pd.to_timedelta(
+                rng.integers(-op["seconds"], op["seconds"] + 1, len(table)), "s"
+            )
+            times = pd.to_datetime(table["time"]) + shift
+            table["time"] = times.dt.strftime("%Y-%m-%d %H:%M:%S").to_numpy()
         else:
             raise AssertionError(f"unknown frame op {kind!r}")
         table = table.reset_index(drop=True)
@@ -180,6 +195,8 @@ def _apply_bytes(path: Path, ops: list[dict[str, Any]]) -> None:
             data = data[: int(len(data) * op["at"])]
         elif op["op"] == "garbage":
             data = np.random.default_rng(len(data)).bytes(op["n"])
+        elif op["op"] == "encode":  # the text saved in another encoding (Excel's UTF-16)
+            data = data.decode("utf-8").encode(op["encoding"])
         else:
             raise AssertionError(f"unknown bytes op {op['op']!r}")
     path.write_bytes(data)
@@ -205,7 +222,7 @@ def build_study(case: Case, tmp_path: Path) -> Path:
     for old, new in case.study:
         assert old in toml, f"{case.id}: {old!r} is not in study.toml"
         toml = toml.replace(old, new)
-    (folder / "study.toml").write_text(toml, encoding="utf-8")
+    (folder / "study.toml").write_text(toml, encoding=case.study_encoding)
     table = _apply_frame(_wall_table(), case.frame)
     if case.preset == "parquet":
         _write_parquet(table, data)
@@ -258,9 +275,13 @@ def test_unbroken_presets_validate(preset: str, tmp_path: Path) -> None:
 
 
 @pytest.mark.parametrize("case", CASES, ids=[c.id for c in CASES])
-def test_bad_input_gives_one_clear_line(case: Case, tmp_path: Path) -> None:
+def test_bad_input_gives_one_clear_line(
+    case: Case, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
     folder = build_study(case, tmp_path)
     before = _files(folder)
+    if case.inject:
+        refuse_writes(monkeypatch, folder / case.inject["under"], case.inject["errno"])
     code, out, err = run_cli(case.args, folder)
     assert code == 2, f"exit {code}; stdout {out!r}; stderr {err!r}"
     assert out == ""
@@ -272,6 +293,18 @@ def test_bad_input_gives_one_clear_line(case: Case, tmp_path: Path) -> None:
     for fragment in case.expect:
         assert fragment in err, f"{fragment!r} not in {err}"
     assert _files(folder) == before, "files were written into the study folder"
+
+
+@pytest.mark.parametrize("case", GOOD, ids=[c.id for c in GOOD])
+def test_inputs_users_produce_that_are_accepted(case: Case, tmp_path: Path) -> None:
+    """What real users produce and bayescal reads (``[[good]]`` in the manifest): the
+    command succeeds and says what it did with the input."""
+    folder = build_study(case, tmp_path)
+    code, out, err = run_cli(case.args, folder)
+    assert code == 0, err
+    assert "training periods" in out
+    for fragment in case.expect:
+        assert fragment in out, f"{fragment!r} not in {out}"
 
 
 def test_debug_flag_shows_the_traceback_instead(tmp_path: Path) -> None:

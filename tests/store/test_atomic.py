@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import errno
 import os
 import stat
 import subprocess
@@ -64,6 +65,31 @@ def test_error_while_writing_leaves_old_file_and_no_temp(tmp_path: Path) -> None
     with pytest.raises(ValueError, match="Out of range float"):
         io.atomic_write_json(tmp_path / "nan.json", {"x": float("nan")})
     assert not (tmp_path / "nan.json").exists()
+
+
+def test_an_error_names_the_final_file(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A write on a full disk names no file, mkstemp names the hidden temporary one: the
+    error names the artefact, so that its one-line message does."""
+    target = tmp_path / "emulator.nc"
+    io.atomic_write_text(target, "old")
+
+    def full(stream) -> None:
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+
+    with pytest.raises(OSError, match="No space left") as info:
+        io.atomic_write(target, full)
+    assert info.value.errno == errno.ENOSPC
+    assert info.value.filename == str(target)
+    assert target.read_text() == "old"
+    assert _leftovers(tmp_path) == []
+
+    def refuse(*args: object, **kwargs: object) -> tuple[int, str]:
+        raise PermissionError(errno.EACCES, "Permission denied", str(tmp_path / ".x.tmp"))
+
+    monkeypatch.setattr(io.tempfile, "mkstemp", refuse)
+    with pytest.raises(PermissionError) as denied:
+        io.atomic_write_text(target, "new")
+    assert denied.value.filename == str(target)
 
 
 def test_fsyncs_file_and_folder(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:

@@ -64,13 +64,16 @@ def validate(study: Path) -> None:
 
     STUDY is study.toml or the folder holding it.
     """
-    from bayescal.cli.progress import study_summary
+    from bayescal.cli.progress import budget_line, study_summary
     from bayescal.config import load_study
     from bayescal.data import load_measured
+    from bayescal.pipeline import check_budget
 
     config = load_study(study)
     measured = load_measured(config)
+    needs = check_budget(config, measured)
     click.echo(study_summary(config, measured))
+    click.echo(budget_line(needs))
 
 
 def _parse_assignments(values: tuple[str, ...]) -> dict[str, float]:
@@ -117,6 +120,7 @@ def simulate(study: Path, assignments: tuple[str, ...], out: Path | None) -> Non
     from bayescal.cli.progress import metrics_text
     from bayescal.config import load_study
     from bayescal.errors import ConfigError
+    from bayescal.pipeline.run import writing
     from bayescal.simulate import check_simulation, write_simulation
 
     config = load_study(study)
@@ -125,10 +129,8 @@ def simulate(study: Path, assignments: tuple[str, ...], out: Path | None) -> Non
         raise ConfigError(f"{folder} exists and is not a folder", hint="give --out a folder")
     check = check_simulation(config, _parse_assignments(assignments))
     values = ", ".join(f"{k}={v:g}" for k, v in check.parameters.items())
-    try:
+    with writing(folder):  # a read-only folder, a full disk, a file in the way: one line
         files = write_simulation(check, folder, title=f"{config.study.name}: {values}")
-    except OSError as exc:  # a read-only folder, a full disk, a file in the way
-        raise ConfigError(f"cannot write into {folder}: {exc.strerror or exc}") from None
     click.echo(f"simulated {config.study.name!r} at {values}")
     click.echo(metrics_text(check.train, check.test))
     click.echo(f"wrote {files['csv']}\nwrote {files['png']}")
@@ -147,13 +149,20 @@ def init(example: str | None, directory: Path | None, force: bool) -> None:
     Without arguments, lists the examples.
     """
     from bayescal import examples
+    from bayescal.errors import OutputError
 
     names = examples.available()
     if example is None:
         click.echo("examples: " + ", ".join(names))
         return
     target = directory if directory is not None else Path(example)
-    examples.copy_example(example, target, force=force)
+    try:
+        examples.copy_example(example, target, force=force)
+    except OSError as exc:  # a read-only folder, a full disk, a file in the way
+        raise OutputError(
+            f"cannot copy the example into {target}: {exc.strerror or exc}",
+            hint="choose a folder you can write",
+        ) from exc
     click.echo(f"created {target}/study.toml from example {example!r}")
     click.echo(f"next: bayescal validate {target}   or   bayescal simulate {target}")
 
@@ -259,8 +268,13 @@ def report(study: Path) -> None:
     """(Re)write the HTML report of a finished calibration."""
     from bayescal.config import load_study
     from bayescal.pipeline import load_results, write_study_report
+    from bayescal.pipeline.run import writing
+    from bayescal.store.folder import OutputLock
 
-    path = write_study_report(load_results(load_study(study)))
+    results = load_results(load_study(study))
+    out = results.context.out
+    with writing(out), OutputLock(out, command="report"):
+        path = write_study_report(results)
     click.echo(f"report: {path}")
 
 

@@ -24,6 +24,7 @@ if TYPE_CHECKING:
     from bayescal.pipeline import Results
 
 __all__ = [
+    "budget_line",
     "comparison_text",
     "describe",
     "mcmc_bar",
@@ -65,7 +66,7 @@ def study_summary(study: Any, measured: Any) -> str:
         f"{measured.n} samples ({format_duration(measured.n * step)})",
         f"periods: warm-up {first} samples, {lay.m_star} training periods of {lay.period} "
         "samples"
-        + (f" ({dropped} more dropped: missing outputs)" if dropped else "")
+        + (f" ({dropped} more dropped: missing data)" if dropped else "")
         + f", test window {lay.test} samples",
     ]
     gaps = measured.gaps
@@ -73,13 +74,37 @@ def study_summary(study: Any, measured: Any) -> str:
         lines.append("gaps: none")
     else:
         filled = sum(g.interpolated for g in gaps)
+        bridged = [g for g in gaps if g.bridged]
         lines.append(
-            f"gaps: {len(gaps)} ({filled} interpolated, {len(gaps) - filled} left missing)"
+            f"gaps: {len(gaps)} ({filled} interpolated, {len(gaps) - filled} left missing"
+            + (f", {len(bridged)} of them in boundary conditions" if bridged else "")
+            + ")"
         )
-        lines += [f"  {g.describe()}" for g in gaps[:20]]
+        zone = getattr(measured, "zone", None)
+        lines += [f"  {g.describe(zone)}" for g in gaps[:20]]
         if len(gaps) > 20:
             lines.append(f"  ... and {len(gaps) - 20} more")
+        if bridged:
+            longest = format_duration(max(g.length for g in bridged))
+            lines.append(
+                "  boundary conditions are bridged linearly over their gaps for the simulator "
+                "and the periods the gaps touch are dropped; data.max_gap_interpolate = "
+                f"'{longest}' interpolates them instead and keeps the periods"
+            )
     return "\n".join(lines)
+
+
+def budget_line(needs: Any) -> str:
+    """``needs: about 21 MiB of memory, 12 MiB of disk (largest: simulations)``."""
+    from bayescal.pipeline.budget import format_bytes
+
+    memory = sum(need.memory for need in needs)
+    disk = sum(need.disk for need in needs)
+    largest = max(needs, key=lambda need: need.memory).what
+    return (
+        f"needs: about {format_bytes(memory)} of memory, {format_bytes(disk)} of disk "
+        f"(largest: {largest}; limits: [runner] max_memory, max_disk)"
+    )
 
 
 def _simulator_line(sim: Any) -> str:

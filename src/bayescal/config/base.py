@@ -8,20 +8,23 @@ Every field carries a description (its unit in brackets) and examples
 from __future__ import annotations
 
 import difflib
+import numbers
 import os
 import re
+import types
 from datetime import date, datetime, timedelta
 from pathlib import Path
-from typing import Annotated, Any
+from typing import Annotated, Any, Union, get_args, get_origin
 
 import pandas as pd
-from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, ValidationInfo
+from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, ValidationInfo, model_validator
 from pydantic_core import PydanticCustomError
 
 from bayescal.clock import parse_duration
 
 __all__ = [
     "IDENTIFIER",
+    "STRICT_NUMBER",
     "Duration",
     "Instant",
     "Section",
@@ -31,14 +34,68 @@ __all__ = [
     "suggestion",
 ]
 
+STRICT_NUMBER = "strict_number"
+"""The pydantic error type of a number-typed key given text, a bool or a fraction."""
+
 IDENTIFIER = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 """Names a study gives (parameters, layers): letters, digits and ``_``, no leading digit."""
 
 
 class Section(BaseModel):
-    """Base of every section: frozen, and unknown keys are errors."""
+    """Base of every section: frozen, unknown keys are errors, numbers are strict.
+
+    A field typed ``int`` takes whole numbers only (``30``, not ``30.0``, ``3e1``
+    or ``"30"``), a field typed ``float`` takes numbers only (``0.12`` or ``1``,
+    not ``"0.12"``), in lists and tables too; ``true`` is no number. pydantic
+    alone would convert all of these silently.
+    """
 
     model_config = ConfigDict(frozen=True, extra="forbid")
+
+    @model_validator(mode="before")
+    @classmethod
+    def _strict_numbers(cls, data: Any) -> Any:
+        if isinstance(data, dict):
+            problems = [
+                (key, problem)
+                for key, value in data.items()
+                if key in cls.model_fields
+                and (problem := _number_problem(value, cls.model_fields[key].annotation))
+            ]
+            if problems:  # config.messages puts each under its key path
+                raise PydanticCustomError(STRICT_NUMBER, "{problems}", {"problems": problems})
+        return data
+
+
+def _bare(annotation: Any) -> Any:
+    """``int | None`` -> ``int``; other unions are kept."""
+    if get_origin(annotation) in (Union, types.UnionType):
+        members = [m for m in get_args(annotation) if m is not type(None)]
+        return members[0] if len(members) == 1 else annotation
+    return annotation
+
+
+def _number_problem(value: Any, annotation: Any) -> str | None:
+    """What is wrong with ``value`` for a number-typed field, ``None`` if nothing is."""
+    kind = _bare(annotation)
+    origin = get_origin(kind)
+    if origin in (list, tuple) and isinstance(value, list | tuple):
+        args = [a for a in get_args(kind) if a is not Ellipsis]
+        if len(args) == 1:
+            return next((p for v in value if (p := _number_problem(v, args[0]))), None)
+        return None
+    if origin is dict and isinstance(value, dict):
+        item = get_args(kind)[-1]
+        return next((p for v in value.values() if (p := _number_problem(v, item))), None)
+    if kind not in (int, float) or value is None:
+        return None
+    if isinstance(value, str):
+        return f"expected a number, got the text {value!r}; write the number without quotes"
+    if isinstance(value, bool):
+        return f"expected a number, got {str(value).lower()}"
+    if kind is int and isinstance(value, numbers.Real) and not isinstance(value, numbers.Integral):
+        return f"expected a whole number (no decimal point or exponent), got {value!r}"
+    return None
 
 
 def field_doc(description: str, *examples: Any, **constraints: Any) -> Any:

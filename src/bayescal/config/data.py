@@ -84,8 +84,10 @@ class DataSection(Section):
         "Timestamp column (csv, parquet: required).", "time", default=None
     )
     time_format: str | None = field_doc(
-        "strftime format of the timestamps (csv, parquet); ISO 8601 if omitted.",
+        "strftime format of the timestamps (csv, parquet); 'epoch' for Unix times (seconds "
+        "since 1970-01-01 UTC), 'epoch_ms' for milliseconds; ISO 8601 if omitted.",
         "%d/%m/%Y %H:%M",
+        "epoch",
         default=None,
     )
     time_zone: str = field_doc(
@@ -113,9 +115,19 @@ class DataSection(Section):
     )
     max_gap_interpolate: Duration = field_doc(
         "Gaps up to this length are interpolated linearly; longer ones are reported and "
-        "their periods dropped. Default: never interpolate.",
+        "the periods they touch dropped (a boundary condition is bridged linearly for the "
+        "simulator over them, and after a gap longer than one period the warm-up that "
+        "follows is dropped too). Default: never interpolate.",
         "1h",
         default=timedelta(0),
+    )
+    resample: Literal["none", "linear"] = field_doc(
+        "'none': data finer than the step are averaged, data as fine must lie on the "
+        "clock. 'linear': each clock instant is interpolated linearly between the two "
+        "samples around it (for a logger whose clock jitters, e.g. 30 min ± 4 min); "
+        "samples more than 1.5 steps apart leave the instants between them missing.",
+        "linear",
+        default="none",
     )
     start: Instant | None = field_doc(
         "First clock instant: crops the record and fixes the grid (default: the grid is "
@@ -135,7 +147,12 @@ class DataSection(Section):
 
     @model_validator(mode="before")
     @classmethod
-    def _infer_format(cls, data: Any) -> Any:
+    def _infer_format(cls, data: Any, info: ValidationInfo) -> Any:
+        if isinstance(data, dict) and isinstance(data.get("file"), str):
+            try:  # a path that leaves the study folder is refused as such, before its format
+                resolve_path(Path(data["file"]), info, "a file name")
+            except ValueError as exc:
+                raise_problems([f"data.file: {exc}"])
         if isinstance(data, dict) and "format" not in data and isinstance(data.get("file"), str):
             suffix = Path(data["file"]).suffix.lower()
             if suffix not in _EXTENSIONS:

@@ -16,6 +16,8 @@ from typing import Any, Literal, Union, get_args, get_origin
 
 from pydantic import BaseModel, ValidationError
 
+from bayescal.config.base import STRICT_NUMBER
+
 __all__ = ["format_errors"]
 
 _TYPE_LABELS = frozenset({"str", "int", "float", "bool", "timedelta", "datetime", "none"})
@@ -98,6 +100,8 @@ def format_errors(exc: ValidationError, model: type[BaseModel]) -> list[str]:
         path = _join(shown)
         if kind == "cross_check":  # messages carry their own full key paths
             message = str(ctx["text"])
+        elif kind == STRICT_NUMBER:  # raised by the section: one problem per key
+            message = "; ".join(f"{_join([*shown, k])}: {text}" for k, text in ctx["problems"])
         elif kind == "extra_forbidden":
             message = _unknown_key(loc, model)
         elif kind == "missing":

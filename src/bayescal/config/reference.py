@@ -14,7 +14,7 @@ from datetime import datetime, timedelta
 from pathlib import Path
 from typing import Any
 
-from pydantic import BaseModel
+from pydantic import BaseModel, ByteSize
 from pydantic_core import PydanticUndefined
 
 from bayescal.clock import format_duration
@@ -70,6 +70,7 @@ def _type_name(annotation: Any) -> str:
         inner = ", ".join(_type_name(a) for a in args)
         return f"{getattr(origin, '__name__', str(origin))}[{inner}]"
     names = {type(None): "None", timedelta: "duration", datetime: "instant", Path: "path"}
+    names[ByteSize] = "size"
     return names.get(annotation, getattr(annotation, "__name__", str(annotation)))
 
 

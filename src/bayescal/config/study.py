@@ -26,6 +26,7 @@ from typing import TYPE_CHECKING, Annotated, Any, Literal
 
 from pydantic import (
     BeforeValidator,
+    ByteSize,
     PrivateAttr,
     ValidationError,
     ValidationInfo,
@@ -435,6 +436,20 @@ class RunnerSection(Section):
     )
     timeout: float | None = field_doc("Time limit per run. [s]", 600.0, default=None, gt=0)
     retries: int = field_doc("Retries of a failed run.", 1, default=0, ge=0)
+    max_memory: ByteSize | None = field_doc(
+        "Memory the study may use; the estimate of what its sizes imply (runs, record, "
+        "samples, basis) is refused beyond it, before anything is allocated. Default: "
+        "BAYESCAL_MAX_MEMORY if set, else this machine's memory. [B]",
+        "64GiB",
+        default=None,
+    )
+    max_disk: ByteSize | None = field_doc(
+        "Disk the output folder may fill; the estimate of what the study writes is refused "
+        "beyond it. Default: BAYESCAL_MAX_DISK if set, else the free space of the output "
+        "folder's file system plus what the folder holds. [B]",
+        "2TiB",
+        default=None,
+    )
 
     @model_validator(mode="after")
     def _scheduler_for_dask(self) -> RunnerSection:
@@ -783,7 +798,7 @@ def load_study(path: str | os.PathLike[str]) -> Study:
         what = f"no {STUDY_FILE} in folder {given}" if given.is_dir() else "file not found"
         raise ConfigError(what, hint="give the study file or its folder", source=str(file))
     try:
-        raw = tomllib.loads(file.read_bytes().decode("utf-8"))
+        raw = tomllib.loads(_study_text(file.read_bytes()))
     except UnicodeDecodeError as exc:
         raise ConfigError(f"not UTF-8 text (byte {exc.start})", source=str(file)) from None
     except tomllib.TOMLDecodeError as exc:
@@ -791,6 +806,14 @@ def load_study(path: str | os.PathLike[str]) -> Study:
     study = study_from_dict(raw, root=file.resolve().parent, source=str(file))
     study._path = file.resolve()
     return study
+
+
+def _study_text(data: bytes) -> str:
+    """The text of a study file: UTF-8, with or without the byte-order mark that Windows
+    editors write; UTF-16 with its byte-order mark (Notepad's "Unicode") too."""
+    if data.startswith((b"\xff\xfe", b"\xfe\xff")):
+        return data.decode("utf-16")
+    return data.decode("utf-8-sig")
 
 
 def study_from_dict(raw: dict[str, Any], *, root: Path, source: str = STUDY_FILE) -> Study:

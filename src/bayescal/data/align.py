@@ -28,6 +28,16 @@ Data as fine as the step
     and :45 with a 30 min step) is an error rather than a silent shift.
 Data coarser than the step
     An error: values are never invented.
+Clocks that jitter
+    A logger whose intervals wander around the step (30 min ± 4 min) is
+    detected and refused with the offer of ``data.resample = "linear"``:
+    each clock instant then takes the linear interpolation of the two
+    samples around it, and an instant whose two samples lie more than 1.5
+    steps apart (a missing row) is missing.
+Messages
+    A problem with rows of the file names the line and the time as the file
+    writes it (:class:`RowLabels`); times on the clock are shown as local
+    times of the study's zone.
 Gaps
     Runs of missing values (rows absent from the file or NaN cells) on the
     clock, per column. A gap no longer than ``max_gap_interpolate`` (its
@@ -42,7 +52,7 @@ Periods
 from __future__ import annotations
 
 from dataclasses import dataclass
-from datetime import tzinfo
+from datetime import timedelta, timezone, tzinfo
 
 import numpy as np
 import pandas as pd
@@ -52,6 +62,64 @@ from bayescal.errors import DataError
 
 MAX_LISTED = 5
 """How many offending items an error message lists."""
+
+JITTER_SPAN = 1.5
+"""With ``resample = "linear"``, samples further apart than this many steps leave the
+instants between them missing."""
+
+
+@dataclass(frozen=True, eq=False)
+class RowLabels:
+    """Where each row of a record comes from, for messages.
+
+    Attributes
+    ----------
+    lines
+        Line (or row) number of each row in the file, shape ``(n,)``.
+    texts
+        The row's time as the file writes it (``"2013-10-27 02:30"``), shape ``(n,)``.
+    """
+
+    lines: np.ndarray
+    texts: np.ndarray
+
+    def __deepcopy__(self, memo: dict[int, object]) -> RowLabels:
+        """Itself: pandas deep-copies a frame's ``attrs`` at every step, and these arrays
+        are never changed."""
+        return self
+
+    def row(self, pos: int) -> str:
+        """``"line 42 ('2013-01-16 04:00')"``."""
+        return f"line {int(self.lines[pos])} ({str(self.texts[pos])!r})"
+
+    def rows(self, positions: np.ndarray | list[int]) -> str:
+        """Several rows, at most :data:`MAX_LISTED` of them."""
+        shown = [self.row(int(p)) for p in list(positions)[:MAX_LISTED]]
+        more = len(positions) - len(shown)
+        return ", ".join(shown) + (f" and {more} more" if more > 0 else "")
+
+
+def local_text(instant: pd.Timestamp | int, zone: tzinfo) -> str:
+    """A UTC instant as a local time of ``zone``: ``"2013-01-16 04:00 (UTC-06:00)"``."""
+    utc = pd.Timestamp(instant)
+    local = (utc if utc.tz is not None else utc.tz_localize("UTC")).tz_convert(zone)
+    seconds = f":{local.second:02d}" if local.second else ""
+    return f"{local:%Y-%m-%d %H:%M}{seconds} ({zone_name(zone)})"
+
+
+def zone_name(zone: tzinfo) -> str:
+    """``"Europe/Brussels"``, ``"UTC-06:00"``, ``"UTC"``."""
+    if isinstance(zone, timezone):
+        offset = zone.utcoffset(None)
+        return "UTC" if not offset else _offset_text(offset)
+    return str(zone)
+
+
+def _offset_text(offset: timedelta) -> str:
+    minutes = round(offset.total_seconds() / 60)
+    sign = "-" if minutes < 0 else "+"
+    hours, rest = divmod(abs(minutes), 60)
+    return f"UTC{sign}{hours:02d}:{rest:02d}"
 
 
 # --------------------------------------------------------------------------- index checks
@@ -63,31 +131,87 @@ def _listed(values: pd.Index | np.ndarray | list[object]) -> str:
     return ", ".join(items) + (f" and {more} more" if more > 0 else "")
 
 
-def localize(index: pd.DatetimeIndex, zone: tzinfo, source: str) -> pd.DatetimeIndex:
+def localize(
+    index: pd.DatetimeIndex, zone: tzinfo, source: str, labels: RowLabels | None = None
+) -> pd.DatetimeIndex:
     """Convert timestamps to UTC; naive ones are local times of ``zone``.
+
+    The autumn hour that a daylight-saving zone repeats is resolved from the
+    order of the rows where the file holds it twice (02:00, 02:30, 02:00,
+    02:30); a local time that stays ambiguous or does not exist is an error.
+
+    Parameters
+    ----------
+    index
+        Timestamps in file order.
+    zone
+        Zone of naive timestamps.
+    source
+        File name, for messages.
+    labels
+        Lines and time texts of the rows (optional, for messages).
 
     Raises
     ------
     DataError
         For local times that are ambiguous or do not exist (daylight-saving
-        changes); the message names the first such time.
+        changes); the message names the line and the time as the file writes it.
     """
     if index.tz is not None:
         return index.tz_convert("UTC")
+    for ambiguous in ("raise", "infer"):
+        try:
+            local = index.tz_localize(zone, ambiguous=ambiguous, nonexistent="raise")
+        except Exception:  # pandas raises ValueError subclasses that moved between versions
+            continue
+        return local.tz_convert("UTC")
+    raise _dst_error(index, zone, source, labels)
+
+
+def _dst_error(
+    index: pd.DatetimeIndex, zone: tzinfo, source: str, labels: RowLabels | None
+) -> DataError:
+    """The error of the first local time that a daylight-saving change makes ambiguous
+    or skips."""
+    flagged = index.tz_localize(zone, ambiguous="NaT", nonexistent="NaT")
+    bad = np.flatnonzero(pd.isna(flagged) & ~pd.isna(index))
+    pos = int(bad[0]) if bad.size else 0
+    where = labels.row(pos) if labels is not None else f"row {pos + 1} ({index[pos]})"
+    time = index[pos]
+    day = f"{time:%Y-%m-%d}"
     try:
-        local = index.tz_localize(zone, ambiguous="raise", nonexistent="raise")
-    except Exception as exc:  # pandas raises ValueError subclasses that moved between versions
-        kind = "ambiguous" if "ambiguous" in type(exc).__name__.lower() + str(exc) else "invalid"
-        raise DataError(
-            f"local time {exc} is {kind} in time zone {zone} (a daylight-saving change)",
-            hint="export the data in UTC or a fixed offset and set data.time_zone "
-            "to it, e.g. 'UTC+01:00'",
+        standard = pd.Timestamp(time + pd.Timedelta(days=1)).tz_localize(zone).utcoffset()
+        before = pd.Timestamp(time - pd.Timedelta(days=1)).tz_localize(zone).utcoffset()
+    except Exception:  # pragma: no cover - a day away from a change is unambiguous
+        standard = before = None
+    repeated = pd.isna(
+        index[pos : pos + 1].tz_localize(zone, ambiguous="NaT", nonexistent="shift_forward")[0]
+    )
+    if repeated:
+        fixed = f", '{_offset_text(standard)}'" if standard is not None else ""
+        return DataError(
+            f"{where}: this local time occurs twice in time zone {zone_name(zone)}, whose "
+            f"clocks go back an hour on {day}, and the file holds it once, so which of the "
+            "two is meant cannot be told",
+            hint="export the data in UTC or with UTC offsets ('2013-10-27T02:30+01:00'), "
+            f"or in local standard time all year and set data.time_zone to its offset{fixed}",
             source=source,
-        ) from None
-    return local.tz_convert("UTC")
+        )
+    fixed = f", '{_offset_text(before)}'" if before is not None else ""
+    return DataError(
+        f"{where}: this local time does not exist in time zone {zone_name(zone)}, whose "
+        f"clocks skip an hour on {day}; the logger probably keeps standard time all year",
+        hint=f"set data.time_zone to the logger's fixed offset{fixed}",
+        source=source,
+    )
 
 
-def check_index(index: pd.DatetimeIndex, source: str, lines: np.ndarray | None = None) -> None:
+def check_index(
+    index: pd.DatetimeIndex,
+    source: str,
+    lines: np.ndarray | None = None,
+    texts: np.ndarray | None = None,
+) -> None:
     """Check timestamps: no missing values, strictly increasing, no duplicates.
 
     Parameters
@@ -98,7 +222,11 @@ def check_index(index: pd.DatetimeIndex, source: str, lines: np.ndarray | None =
         File name, for messages.
     lines
         Line number in the file of each timestamp (optional, for messages).
+    texts
+        Each timestamp as the file writes it (optional, with ``lines``): messages
+        then show it instead of the UTC time.
     """
+    labels = RowLabels(lines, texts) if lines is not None and texts is not None else None
 
     def where(pos: np.ndarray) -> str:
         if lines is None:
@@ -109,20 +237,31 @@ def check_index(index: pd.DatetimeIndex, source: str, lines: np.ndarray | None =
     if missing.size:
         raise DataError(f"missing or unreadable timestamps at {where(missing)}", source=source)
     if index.has_duplicates:
-        dup = index[index.duplicated()].unique()
+        hint = "remove the repeated rows (or use UTC if they come from a clock change)"
+        if labels is None:
+            dup = index[index.duplicated()].unique()
+            raise DataError(f"duplicated timestamps {_listed(dup)}", hint=hint, source=source)
+        _, first, inverse = np.unique(index.asi8, return_index=True, return_inverse=True)
+        repeats = np.flatnonzero(index.duplicated())
+        shown = [
+            f"{labels.row(int(p))} repeats line {int(lines[first[inverse[p]]])}"  # type: ignore[index]
+            for p in repeats[:MAX_LISTED]
+        ]
+        more = f" and {repeats.size - len(shown)} more" if repeats.size > len(shown) else ""
         raise DataError(
-            f"duplicated timestamps {_listed(dup)}",
-            hint="remove the repeated rows (or use UTC if they come from a clock change)",
-            source=source,
+            f"duplicated timestamps: {'; '.join(shown)}{more}", hint=hint, source=source
         )
     if index.size > 1:
         back = np.flatnonzero(np.diff(index.asi8) < 0) + 1
         if back.size:
-            shown = [f"{index[p]} after {index[p - 1]}" for p in back[:MAX_LISTED]]
+            if labels is None:
+                shown = [f"{index[p]} after {index[p - 1]}" for p in back[:MAX_LISTED]]
+                text = f"{where(back)}: {'; '.join(shown)}"
+            else:
+                shown = [f"{labels.row(p)} after {labels.row(p - 1)}" for p in back[:MAX_LISTED]]
+                text = "; ".join(shown)
             raise DataError(
-                f"timestamps go backwards at {where(back)}: {'; '.join(shown)}",
-                hint="sort the file by time",
-                source=source,
+                f"timestamps go backwards at {text}", hint="sort the file by time", source=source
             )
 
 
@@ -159,6 +298,8 @@ def align(
     start: pd.Timestamp | None = None,
     end: pd.Timestamp | None = None,
     source: str = "data",
+    labels: RowLabels | None = None,
+    resample: str = "none",
 ) -> pd.DataFrame:
     """Put a record on the regular study clock (see the module conventions).
 
@@ -170,13 +311,19 @@ def align(
         Clock step.
     zone
         The study's time zone: anchors the default grid at local midnight and
-        localises naive ``start``/``end``.
+        localises naive ``start``/``end``; messages show local times of it.
     start
         First instant of the clock (optional); it also fixes the grid.
     end
         End of the record, exclusive (optional): the last instant is before it.
     source
         File name, for messages.
+    labels
+        Lines and time texts of the rows of ``frame`` (optional, for messages).
+    resample
+        ``"none"``: centred means of finer data, timestamps on the clock for
+        data as fine as the step; ``"linear"``: linear interpolation between
+        the samples around each instant (for clocks that jitter).
 
     Returns
     -------
@@ -188,50 +335,128 @@ def align(
         raise DataError("align needs a tz-aware (UTC) time index", source=source)
     data_step = infer_step(index)
     ns = step.value
-    if data_step.value > ns * (1 + 1e-9):
+    t = index.asi8
+    linear = resample == "linear"
+    if not linear:
+        _check_jitter(t, ns, source, labels)
+    if data_step.value > ns * (1 + 1e-9) and not (linear and data_step.value <= 1.25 * ns):
         raise DataError(
             f"the data are sampled every {format_duration(data_step)}, coarser than the "
             f"study step {format_duration(step)}; values are never invented",
             hint=f"set data.step to {format_duration(data_step)} or a multiple of it",
             source=source,
         )
-    t = index.asi8
-    margin = (ns - data_step.value) // 2  # half a window beyond the samples' own half-step
+    margin = 0 if linear else (ns - data_step.value) // 2  # half a window beyond the samples
     lo, hi = t[0] + margin, t[-1] - margin
     start_utc, end_utc = _to_utc(start, zone), _to_utc(end, zone)
     origin = start_utc if start_utc is not None else _midnight_origin(index[0], zone)
     if start_utc is not None and start_utc.value < lo:
+        first_row = f"; {labels.row(0)} is the first row" if labels is not None else ""
         raise DataError(
-            f"data.start {start_utc} is before the data cover it; the earliest start is "
-            f"{pd.Timestamp(lo, tz='UTC')}",
+            f"data.start {local_text(start_utc, zone)} is before the data cover it; the "
+            f"earliest start is {local_text(lo, zone)}{first_row}",
             source=source,
         )
     first = origin.value + max(0, -(-(lo - origin.value) // ns)) * ns
     if end_utc is not None:
         if end_utc.value > hi + ns:
+            last_row = labels.row(len(t) - 1) if labels is not None else local_text(t[-1], zone)
             raise DataError(
-                f"data.end {end_utc} is after the end of the data "
-                f"({pd.Timestamp(t[-1], tz='UTC')})",
+                f"data.end {local_text(end_utc, zone)} is after the end of the data ({last_row})",
                 source=source,
             )
         hi = min(hi, end_utc.value - ns)
     if hi < first:
         raise DataError("no clock instant lies inside the (cropped) record", source=source)
-    count = (hi - first) // ns + 1
+    count = int((hi - first) // ns + 1)
+    if linear:
+        return _interpolate(frame, t, first, ns, count)
     if data_step.value == ns:
-        _check_on_grid(t[(t >= first) & (t <= hi)], first, ns, source)
-    return _bin_means(frame, t, first, ns, int(count), ns / data_step.value)
+        inside = np.flatnonzero((t >= first) & (t <= hi))
+        _check_on_grid(t, inside, first, ns, source, zone, labels)
+    return _bin_means(frame, t, first, ns, count, ns / data_step.value)
 
 
-def _check_on_grid(t: np.ndarray, first: int, ns: int, source: str) -> None:
-    off = np.flatnonzero((t - first) % ns != 0)
+def _check_jitter(t: np.ndarray, ns: int, source: str, labels: RowLabels | None) -> None:
+    """Refuse, with the offer of ``data.resample``, a clock that wanders around the step.
+
+    Intervals about as long as the step (between half a step and 1.5 steps, longer
+    ones being gaps) of which at least a tenth miss the step by more than a second,
+    while the median interval lies within a quarter of a step of it: a logger whose
+    clock jitters. A record shifted off the grid or with one misplaced row is not
+    that (its intervals are the step), nor data finer than the step.
+    """
+    if t.size < 3:
+        return
+    dt = np.diff(t)
+    near = dt[(dt > ns // 2) & (dt <= 1.5 * ns)]
+    if near.size < 2 or abs(float(np.median(dt)) - ns) > 0.25 * ns:
+        return
+    off = np.abs(near - ns) > 1_000_000_000
+    if off.mean() < 0.1:
+        return
+    short, long = pd.Timedelta(int(near.min())), pd.Timedelta(int(near.max()))
+    worst = int(np.argmax(np.abs(dt - ns))) + 1
+    example = f"; e.g. {labels.row(worst)} after {labels.row(worst - 1)}" if labels else ""
+    raise DataError(
+        f"the timestamps jitter around the study step {format_duration(pd.Timedelta(ns))}: "
+        f"{int(off.sum())} of {near.size} intervals between rows differ from it, from "
+        f"{format_duration(short)} to {format_duration(long)}{example}",
+        hint="set data.resample = 'linear' to interpolate the samples onto the study clock",
+        source=source,
+    )
+
+
+def _interpolate(
+    frame: pd.DataFrame, t: np.ndarray, first: int, ns: int, count: int
+) -> pd.DataFrame:
+    """Each clock instant from the two finite samples around it, linearly; missing where
+    they lie more than :data:`JITTER_SPAN` steps apart (or an instant is beyond them)."""
+    clock_ns = first + np.arange(count, dtype=np.int64) * ns
+    out = {}
+    for name in frame.columns:
+        values = np.asarray(frame[name], dtype=float)
+        good = np.isfinite(values)
+        times, kept = t[good], values[good]
+        result = np.full(count, np.nan)
+        if times.size >= 1:
+            right = np.clip(np.searchsorted(times, clock_ns, side="left"), 0, times.size - 1)
+            exact = times[right] == clock_ns
+            left = np.clip(right - 1, 0, times.size - 1)
+            span = times[right] - times[left]
+            ok = exact | ((clock_ns > times[left]) & (clock_ns < times[right]))
+            ok &= exact | (span <= JITTER_SPAN * ns)
+            origin = times[0]
+            result[ok] = np.interp(
+                (clock_ns[ok] - origin).astype(float), (times - origin).astype(float), kept
+            )
+        out[name] = result
+    clock = pd.DatetimeIndex(clock_ns, tz="UTC", name="time")
+    return pd.DataFrame(out, index=clock, columns=frame.columns)
+
+
+def _check_on_grid(
+    t: np.ndarray,
+    inside: np.ndarray,
+    first: int,
+    ns: int,
+    source: str,
+    zone: tzinfo,
+    labels: RowLabels | None,
+) -> None:
+    off = inside[(t[inside] - first) % ns != 0]
     if off.size:
-        bad = pd.DatetimeIndex(t[off], tz="UTC")
+        step = format_duration(pd.Timedelta(ns))
+        if labels is not None:
+            rows = labels.rows(off)
+        else:
+            rows = _listed([local_text(v, zone) for v in t[off]])
+        start = pd.Timestamp(t[off[0]], tz="UTC").tz_convert(zone)
         raise DataError(
-            f"timestamps {_listed(bad)} are not on the study clock "
-            f"(instants {pd.Timestamp(first, tz='UTC')} + k × {format_duration(pd.Timedelta(ns))})",
-            hint=f"set data.start = '{bad[0].isoformat()}' to start the clock on the data's "
-            "own instants",
+            f"timestamps {rows} are not on the study clock (instants "
+            f"{local_text(first, zone)} + k × {step})",
+            hint=f"set data.start = '{start:%Y-%m-%dT%H:%M:%S}' to start the clock on the "
+            "data's own instants",
             source=source,
         )
 
@@ -284,6 +509,11 @@ class Gap:
         ``samples * step``.
     interpolated
         Whether the run was filled by linear interpolation.
+    bridged
+        Whether a boundary condition was bridged over it for the simulator (and the
+        periods it touches dropped): see :func:`bayescal.data.load_measured`.
+    where
+        Where it lies in the file (``"after line 601 ('2013-01-24 11:00')"``), if known.
     """
 
     columns: tuple[str, ...]
@@ -292,13 +522,32 @@ class Gap:
     samples: int
     length: pd.Timedelta
     interpolated: bool
+    bridged: bool = False
+    where: str = ""
 
-    def describe(self) -> str:
-        """One line: ``2013-08-22 10:00 – 12:30 UTC (6 samples, 3h): temp_surf_in``."""
-        state = "interpolated" if self.interpolated else "left missing"
+    def describe(self, zone: tzinfo | None = None) -> str:
+        """One line: ``2013-08-22 10:00 – 12:30 UTC (6 samples, 3h, left missing): temp_surf_in``.
+
+        Parameters
+        ----------
+        zone
+            Show local times of this zone instead of UTC.
+        """
+        if self.interpolated:
+            state = "interpolated"
+        elif self.bridged:
+            state = "bridged for the simulator, its periods dropped"
+        else:
+            state = "left missing"
+        first, last = self.first, self.last
+        label = "UTC"
+        if zone is not None:
+            first, last = first.tz_convert(zone), last.tz_convert(zone)
+            label = zone_name(zone)
+        where = f"; {self.where}" if self.where else ""
         return (
-            f"{self.first:%Y-%m-%d %H:%M} – {self.last:%Y-%m-%d %H:%M} UTC "
-            f"({self.samples} samples, {format_duration(self.length)}, {state}): "
+            f"{first:%Y-%m-%d %H:%M} – {last:%Y-%m-%d %H:%M} {label} "
+            f"({self.samples} samples, {format_duration(self.length)}, {state}{where}): "
             + ", ".join(self.columns)
         )
 

@@ -10,9 +10,10 @@ outputs; every other mapped column is a boundary condition.
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from datetime import timedelta, tzinfo
+from datetime import UTC, timedelta, tzinfo
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -20,7 +21,7 @@ import numpy as np
 import pandas as pd
 
 from bayescal.clock import format_duration
-from bayescal.data.align import Gap, align, fill_gaps
+from bayescal.data.align import Gap, RowLabels, align, fill_gaps
 from bayescal.data.readers import (
     epw_field,
     read_csv,
@@ -62,6 +63,8 @@ class MeasuredData:
     held_out
         Measured outputs that are predicted but never calibrated on
         (``[outputs] held_out``), NaN where missing.
+    zone
+        The zone of the file's local times (messages show times in it).
     """
 
     forcing: Forcing
@@ -71,6 +74,7 @@ class MeasuredData:
     gaps: tuple[Gap, ...]
     layout: PeriodLayout
     source: Path
+    zone: tzinfo = UTC
     held_out: Mapping[str, np.ndarray] = field(default_factory=dict)
 
     @property
@@ -91,7 +95,8 @@ def _missing(outputs: Mapping[str, np.ndarray], n: int) -> np.ndarray:
 
 
 def _read(data: DataSection, sources: list[str | int]) -> tuple[pd.DataFrame, tzinfo]:
-    """The mapped source columns, and the zone of local times (the EPW file's own)."""
+    """The mapped source columns, and the zone of local times (the EPW file's own);
+    ``attrs["rows"]`` keeps the lines and time texts of the rows."""
     zone = data.zone
     if data.format == "csv":
         frame = read_csv(
@@ -115,6 +120,7 @@ def _read(data: DataSection, sources: list[str | int]) -> tuple[pd.DataFrame, tz
         weather = read_epw(data.file)
         zone = weather.attrs["time_zone"]
         frame = weather[[epw_field(s) for s in sources]].set_axis(sources, axis=1)
+        frame.attrs["rows"] = weather.attrs.get("rows")
     elif data.epoch is None:  # pragma: no cover - the config requires it
         raise DataError("data.epoch is required for Modelica tables")
     else:
@@ -249,20 +255,63 @@ def layout_for(
     return layout_periods(n_samples, length, warmup, test, missing)
 
 
-def _check_forcing(
-    frame: pd.DataFrame, names: tuple[str, ...], gaps: list[Gap], source: str
-) -> None:
+def _where(gap: Gap, raw: pd.DatetimeIndex, labels: RowLabels | None, step: int) -> str:
+    """Where a gap lies in the file: the lines of its rows, or the rows around it."""
+    if labels is None:
+        return ""
+    t = raw.asi8
+    lo = int(np.searchsorted(t, gap.first.value - step // 2, side="left"))
+    hi = int(np.searchsorted(t, gap.last.value + step // 2, side="right"))
+    if hi > lo:
+        first, last = int(labels.lines[lo]), int(labels.lines[hi - 1])
+        return f"file line {first}" if first == last else f"file lines {first}-{last}"
+    if lo == 0:
+        return f"before {labels.row(0)}"
+    if lo >= t.size:
+        return f"after {labels.row(t.size - 1)}"
+    return f"no rows between {labels.row(lo - 1)} and {labels.row(lo)}"
+
+
+def _bridge(
+    frame: pd.DataFrame, names: tuple[str, ...], gaps: list[Gap], periods: tuple[int, int]
+) -> tuple[pd.DataFrame, list[Gap], np.ndarray]:
+    """Bridge the boundary conditions over the gaps left missing, for the simulator.
+
+    Each column is interpolated linearly over its missing samples (held at the
+    record's ends). The samples of a gap are unusable for calibration, and after
+    a gap longer than one period also the warm-up that follows it: the simulator
+    forgets the invented inputs as it forgets its initial state.
+
+    Returns
+    -------
+    frame, gaps, unusable
+        The bridged frame, the gaps (the bridged ones marked), and the mask of
+        unusable samples, shape ``(n,)``.
+    """
+    period, warmup = periods
+    index = pd.DatetimeIndex(frame.index)
+    n = index.size
+    unusable = np.zeros(n, dtype=bool)
+    out = []
     for gap in gaps:
-        hit = [c for c in gap.columns if c in names]
-        if hit and not gap.interpolated:
-            raise DataError(
-                f"boundary condition(s) {', '.join(hit)} missing over "
-                f"{gap.describe().split(' (')[0]} ({format_duration(gap.length)}); "
-                "the simulator cannot run on missing inputs",
-                hint=f"set data.max_gap_interpolate >= '{format_duration(gap.length)}' to "
-                "interpolate it, or crop the record with data.start / data.end",
-                source=source,
-            )
+        if gap.interpolated or not any(c in names for c in gap.columns):
+            out.append(gap)
+            continue
+        a = int(index.searchsorted(gap.first))
+        b = a + gap.samples
+        unusable[a : b + (warmup if gap.samples > period else 0)] = True
+        out.append(dataclasses.replace(gap, bridged=True))
+    if not unusable.any():
+        return frame, gaps, unusable
+    bridged = frame.copy()
+    positions = np.arange(n)
+    for name in names:
+        values = bridged[name].to_numpy(dtype=float)
+        good = np.isfinite(values)
+        if not good.any():
+            raise DataError(f"boundary condition {name} has no value on the study clock")
+        bridged[name] = np.interp(positions, positions[good], values[good])
+    return bridged, out, unusable
 
 
 def load_measured(study: Study) -> MeasuredData:
@@ -277,17 +326,26 @@ def load_measured(study: Study) -> MeasuredData:
     -------
     MeasuredData
 
+    Notes
+    -----
+    Gaps of the boundary conditions that are not interpolated
+    (``data.max_gap_interpolate``) are bridged linearly for the simulator, and the
+    periods they touch are dropped, like periods with a missing measurement
+    (after a gap longer than one period, the periods of the warm-up that follows
+    it too).
+
     Raises
     ------
     DataError
         Unreadable file, bad timestamps, data coarser than the step, a record
-        too short for warm-up + one period + test window, or boundary
-        conditions with gaps that are not interpolated.
+        too short for warm-up + one period + test window, or no training period
+        left.
     """
     data = study.data
     source = str(data.file)
     sources = list(dict.fromkeys(spec.source for spec in data.columns.values()))
     raw, zone = _read(data, sources)
+    labels = raw.attrs.get("rows")
     step = pd.Timedelta(data.step)
     frame = align(
         _convert(raw, data),
@@ -296,16 +354,23 @@ def load_measured(study: Study) -> MeasuredData:
         start=None if data.start is None else pd.Timestamp(data.start),
         end=None if data.end is None else pd.Timestamp(data.end),
         source=source,
+        labels=labels,
+        resample=data.resample,
     )
     frame, gaps = fill_gaps(frame, pd.Timedelta(data.max_gap_interpolate))
-    outputs = {name: frame[name].to_numpy(dtype=float) for name in study.outputs.calibrate}
+    raw_index = pd.DatetimeIndex(raw.index).as_unit("ns")
+    gaps = [dataclasses.replace(g, where=_where(g, raw_index, labels, step.value)) for g in gaps]
+    forcing_names = study.boundary_conditions
+    periods = (_samples(study.periods.length, step), _samples(study.periods.warmup, step))
+    frame, gaps, unusable = _bridge(frame, forcing_names, gaps, periods)
+    outputs = {n: frame[n].to_numpy(dtype=float, copy=True) for n in study.outputs.calibrate}
+    for values in outputs.values():
+        values[unusable] = np.nan  # measured, but against invented inputs
     _check_outputs(outputs, data, source)
     try:
         layout = layout_for(len(frame), step, study.periods, _missing(outputs, len(frame)))
     except DataError as exc:  # name the file the record comes from
         raise DataError(exc.message, hint=exc.hint, source=exc.source or source) from None
-    forcing_names = study.boundary_conditions
-    _check_forcing(frame, forcing_names, gaps, source)
     index = pd.DatetimeIndex(frame.index).tz_convert("UTC").tz_localize(None)
     times = index.to_numpy().astype("datetime64[s]")
     forcing = Forcing(
@@ -322,5 +387,6 @@ def load_measured(study: Study) -> MeasuredData:
         tuple(gaps),
         layout,
         Path(source),
+        zone,
         held_out,
     )

@@ -19,7 +19,7 @@ import numpy as np
 import pandas as pd
 
 from bayescal.clock import parse_time_zone
-from bayescal.data.align import MAX_LISTED, check_index, localize
+from bayescal.data.align import MAX_LISTED, RowLabels, check_index, localize
 from bayescal.errors import DataError
 from bayescal.simulators.epw_format import EPW_FIELDS
 
@@ -36,18 +36,39 @@ def _read_text(path: Path) -> str:
             hint="check data.file in study.toml (relative paths start at the study folder)",
             source=str(path),
         )
+    data = path.read_bytes()
+    utf16 = _utf16(data)
     try:
-        text = path.read_bytes().decode("utf-8-sig")
+        text = data.decode(utf16 or "utf-8-sig")
     except UnicodeDecodeError as exc:
-        try:
-            text = path.read_bytes().decode("latin-1")
-        except UnicodeDecodeError:  # pragma: no cover - latin-1 decodes any byte
-            raise DataError(f"cannot decode the file: {exc}", source=str(path)) from None
+        if utf16:
+            raise DataError(
+                f"cannot read the file as UTF-16 text (byte {exc.start})",
+                hint="re-save it as UTF-8 text (CSV UTF-8 in Excel)",
+                source=str(path),
+            ) from None
+        text = data.decode("latin-1")  # decodes any byte
     if "\x00" in text:
         raise DataError("the file contains NUL bytes: it is not a text file", source=str(path))
     if not text.strip():
         raise DataError("the file is empty", source=str(path))
     return text
+
+
+def _utf16(data: bytes) -> str | None:
+    """``"utf-16"`` for text with a UTF-16 byte-order mark, ``"utf-16-le"``/``"-be"`` for
+    UTF-16 without one (a NUL byte beside every ASCII character: Excel's "Unicode
+    text"), else ``None``."""
+    if data.startswith((b"\xff\xfe", b"\xfe\xff")):
+        return "utf-16"
+    head = data[:200]
+    if len(head) >= 8 and len(head) % 2 == 0:
+        even, odd = head[0::2], head[1::2]
+        if odd.count(0) == len(odd) and even.count(0) == 0:
+            return "utf-16-le"
+        if even.count(0) == len(even) and odd.count(0) == 0:
+            return "utf-16-be"
+    return None
 
 
 # --------------------------------------------------------------------------- numbers
@@ -85,8 +106,14 @@ def _to_float(
 
 
 def _numeric_frame(
-    columns: dict[str, np.ndarray], index: pd.DatetimeIndex, lines: np.ndarray, source: str
+    columns: dict[str, np.ndarray],
+    index: pd.DatetimeIndex,
+    lines: np.ndarray,
+    source: str,
+    texts: np.ndarray,
 ) -> pd.DataFrame:
+    """The frame of a reader; ``attrs["rows"]`` holds each row's line and time as written
+    (:class:`~bayescal.data.align.RowLabels`), for messages of later steps."""
     for name, values in columns.items():
         infinite = np.flatnonzero(np.isinf(values))
         if infinite.size:
@@ -98,7 +125,8 @@ def _numeric_frame(
             )
     frame = pd.DataFrame(columns, index=_ns_index(pd.DatetimeIndex(index), lines, source))
     frame.index.name = "time"
-    check_index(pd.DatetimeIndex(frame.index), source, lines)
+    check_index(pd.DatetimeIndex(frame.index), source, lines, texts)
+    frame.attrs["rows"] = RowLabels(np.asarray(lines), np.asarray(texts, dtype=str))
     return frame
 
 
@@ -194,11 +222,61 @@ def _check_offsets(texts: pd.Series, lines: np.ndarray, source: str) -> None:
         )
 
 
+EPOCH_FORMATS = {"epoch": "s", "epoch_ms": "ms"}
+"""``data.time_format`` values for Unix times: seconds (or milliseconds) since
+1970-01-01 00:00 UTC."""
+_EPOCH_LIMIT = 9.2e9  # seconds: the nanosecond timestamps end in 2262
+
+
+def _epoch_times(texts: pd.Series, lines: np.ndarray, unit: str, source: str) -> pd.DatetimeIndex:
+    """Unix times (``unit`` ``"s"`` or ``"ms"``) -> tz-aware UTC times, to the millisecond."""
+    numbers = pd.to_numeric(texts, errors="coerce").to_numpy(dtype=float)
+    seconds = numbers / (1000.0 if unit == "ms" else 1.0)
+    bad = np.flatnonzero(~(np.abs(seconds) < _EPOCH_LIMIT))
+    if bad.size:
+        name = "milliseconds" if unit == "ms" else "seconds"
+        hint = (
+            "data.time_format = 'epoch' reads seconds, 'epoch_ms' milliseconds"
+            if np.isfinite(numbers[bad[0]])
+            else "these are no Unix times: remove data.time_format for ISO 8601 times, or "
+            "give their strftime format"
+        )
+        raise DataError(
+            f"line {lines[bad[0]]}: cannot read time {texts.iloc[bad[0]]!r} as {name} since "
+            "1970-01-01 UTC",
+            hint=hint,
+            source=source,
+        )
+    millis = np.round(seconds * 1e3).astype(np.int64)
+    return pd.DatetimeIndex(pd.to_datetime(millis, unit="ms", utc=True))
+
+
+def _time_hint(time_format: str | None, cell: str) -> str:
+    if time_format:
+        return "check data.time_format (strftime codes, e.g. '%d/%m/%Y %H:%M')"
+    try:
+        number = float(cell)
+    except ValueError:
+        number = 0.0
+    if abs(number) > 1e8:
+        unit = "epoch_ms" if abs(number) > 1e11 else "epoch"
+        return (
+            f"the times look like Unix times: set data.time_format = '{unit}' "
+            f"({'milli' if unit == 'epoch_ms' else ''}seconds since 1970-01-01 UTC)"
+        )
+    return (
+        "set data.time_format (strftime codes, e.g. '%d/%m/%Y %H:%M', or 'epoch'); "
+        "without it times must be ISO 8601"
+    )
+
+
 def _parse_times(
     cells: np.ndarray, lines: np.ndarray, time_format: str | None, source: str
 ) -> pd.DatetimeIndex:
-    fmt = time_format or "ISO8601"
     texts = pd.Series(cells, dtype=object).astype(str).str.strip()
+    if time_format in EPOCH_FORMATS:
+        return _epoch_times(texts, lines, EPOCH_FORMATS[time_format], source)
+    fmt = time_format or "ISO8601"
     try:
         times = pd.to_datetime(texts, format=fmt, errors="coerce")
     except (ValueError, TypeError) as exc:  # mixed offsets, bad format string
@@ -209,15 +287,9 @@ def _parse_times(
             raise DataError(f"cannot read the time column: {exc}", source=source) from None
     bad = np.flatnonzero(pd.isna(times).to_numpy())
     if bad.size:
-        hint = (
-            "check data.time_format (strftime codes, e.g. '%d/%m/%Y %H:%M')"
-            if time_format
-            else "set data.time_format (strftime codes, e.g. '%d/%m/%Y %H:%M'); "
-            "without it times must be ISO 8601"
-        )
         raise DataError(
             f"line {lines[bad[0]]}: cannot read time {str(cells[bad[0]])!r}",
-            hint=hint,
+            hint=_time_hint(time_format, str(cells[bad[0]]).strip()),
             source=source,
         )
     return pd.DatetimeIndex(times)
@@ -281,13 +353,16 @@ def read_csv(
     cells = np.array(rows, dtype=object)
     line_numbers = np.asarray(lines)
     wanted = _select([h for h in header if h != time_column], columns, source)
-    times = _parse_times(cells[:, header.index(time_column)], line_numbers, time_format, source)
-    index = localize(times, _zone(time_zone, source), source)
+    time_cells = cells[:, header.index(time_column)]
+    texts = np.array([str(c).strip() for c in time_cells])
+    times = _parse_times(time_cells, line_numbers, time_format, source)
+    labels = RowLabels(line_numbers, texts)
+    index = localize(times, _zone(time_zone, source), source, labels)
     data = {
         name: _to_float(cells[:, header.index(name)], line_numbers, name, source, decimal)
         for name in wanted
     }
-    return _numeric_frame(data, index, line_numbers, source)
+    return _numeric_frame(data, index, line_numbers, source, texts)
 
 
 def _zone(time_zone: tzinfo | str | None, source: str) -> tzinfo:
@@ -339,9 +414,12 @@ def read_parquet(
     raw_time = frame[time_column]
     if pd.api.types.is_datetime64_any_dtype(raw_time):
         times = pd.DatetimeIndex(raw_time)
+        texts = np.array([str(t) for t in times])
     else:
-        times = _parse_times(raw_time.to_numpy(dtype=object), lines, time_format, source)
-    index = localize(times, _zone(time_zone, source), source)
+        cells = raw_time.to_numpy(dtype=object)
+        texts = np.array([str(c).strip() for c in cells])
+        times = _parse_times(cells, lines, time_format, source)
+    index = localize(times, _zone(time_zone, source), source, RowLabels(lines, texts))
     data = {}
     for name in wanted:
         col = frame[name]
@@ -349,7 +427,7 @@ def read_parquet(
             data[name] = col.to_numpy(dtype=float, na_value=np.nan)
         else:
             data[name] = _to_float(col.to_numpy(dtype=object), lines, name, source)
-    return _numeric_frame(data, index, lines, source)
+    return _numeric_frame(data, index, lines, source, texts)
 
 
 # --------------------------------------------------------------------------- EPW
@@ -397,6 +475,11 @@ def _epw_zone(location: str, source: str) -> tzinfo:
         raise DataError(
             f"line 1: time zone {fields[8]!r} is not a number of hours", source=source
         ) from None
+    if not -12.0 <= hours <= 14.0:  # NaN included
+        raise DataError(
+            f"line 1: time zone {fields[8]!r} is not a UTC offset (expected -12 to +14 hours)",
+            source=source,
+        )
     return timezone(timedelta(hours=hours))
 
 
@@ -448,6 +531,7 @@ def read_epw(path: str | Path, *, year: int | None = None) -> pd.DataFrame:
         for i, name in enumerate(EPW_FIELDS[:5])
     }
     index = _epw_times(stamp, year, line_numbers, source)
+    texts = np.array([",".join(str(c).strip() for c in row[:5]) for row in rows])
     index = localize(index, zone, source)
     data = {}
     for i, name in enumerate(EPW_FIELDS[6:width], start=6):
@@ -457,7 +541,7 @@ def read_epw(path: str | Path, *, year: int | None = None) -> pd.DataFrame:
         if name in _EPW_MISSING:
             values[values >= _EPW_MISSING[name]] = np.nan
         data[name] = values
-    frame = _numeric_frame(data, index, line_numbers, source)
+    frame = _numeric_frame(data, index, line_numbers, source, texts)
     frame.attrs["time_zone"] = zone
     return frame
 
@@ -626,4 +710,5 @@ def read_modelica_table(
         )
     offsets = pd.to_timedelta(np.round(seconds * 1e3).astype(np.int64), unit="ms")
     index = pd.DatetimeIndex(start.tz_convert("UTC") + offsets)
-    return _numeric_frame({c: values[:, c] for c in wanted}, index, lines, source)
+    texts = np.array([line.replace(",", " ").split()[0] for _, line in body])
+    return _numeric_frame({c: values[:, c] for c in wanted}, index, lines, source, texts)

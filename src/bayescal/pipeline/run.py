@@ -15,19 +15,24 @@ whichever stage it stopped.
 
 from __future__ import annotations
 
+import contextlib
 import logging
+import os
 import shutil
 import time
-from collections.abc import Callable
+import zipfile
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from bayescal.atomic import read_npz
 from bayescal.calibration.posterior import Posterior
 from bayescal.config import Study
 from bayescal.design import Design
 from bayescal.discrepancy import Discrepancy
-from bayescal.errors import ConfigError
+from bayescal.errors import BayescalError, ConfigError, DataError
+from bayescal.pipeline.budget import check_budget
 from bayescal.pipeline.keys import stage_keys
 from bayescal.pipeline.stages import (
     Context,
@@ -51,11 +56,15 @@ from bayescal.store import emulator as emulator_store
 from bayescal.store import posterior as posterior_store
 from bayescal.store import predictions as predictions_store
 from bayescal.store import runs as runs_store
+from bayescal.store.folder import OutputLock, is_output_error, output_error
 from bayescal.store.stages import STAGES, StageLog
 
-__all__ = ["Results", "file_logger", "load_results", "run", "write_study_report"]
+__all__ = ["Results", "file_logger", "load_results", "run", "write_study_report", "writing"]
 
 Say = Callable[[str], None]
+#: What reading back a damaged artefact raises (a truncated archive, a netCDF file that
+#: is not one, a variable or key missing): the stage is computed again.
+UNREADABLE = (BayescalError, OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile)
 #: The report page, relative to the output folder.
 REPORT_FILE = Path("report") / "report.html"
 LOG_FILE = "bayescal.log"
@@ -108,18 +117,40 @@ class Results:
         return tuple(found)
 
 
+class _LogFile(logging.FileHandler):
+    """A log file that stops writing, quietly, when writing fails (a full disk): the run
+    goes on, and its next artefact reports the disk in one line. logging's own
+    handler would print a traceback for every record instead."""
+
+    failed = False
+
+    def emit(self, record: logging.LogRecord) -> None:
+        if not self.failed:
+            super().emit(record)
+
+    def handleError(self, record: logging.LogRecord) -> None:
+        self.failed = True
+
+
 def file_logger(folder: Path) -> logging.Logger:
-    """The ``bayescal`` logger, writing to ``folder/bayescal.log`` (appending)."""
+    """The ``bayescal`` logger, writing to ``folder/bayescal.log`` (appending).
+
+    Raises
+    ------
+    OSError
+        If the log file cannot be opened (the caller reports it in one line).
+    """
     logger = logging.getLogger("bayescal.run")
     logger.setLevel(logging.INFO)
     logger.propagate = False
     target = str((folder / LOG_FILE).resolve())
     for handler in list(logger.handlers):
-        if getattr(handler, "baseFilename", None) != target:
+        if getattr(handler, "baseFilename", None) != target or getattr(handler, "failed", True):
             logger.removeHandler(handler)
-            handler.close()
+            with contextlib.suppress(OSError, ValueError):  # a full disk, a closed file
+                handler.close()
     if not logger.handlers:
-        handler = logging.FileHandler(target, encoding="utf-8")
+        handler = _LogFile(target, encoding="utf-8")
         handler.setFormatter(logging.Formatter("%(asctime)s %(levelname)s %(message)s"))
         logger.addHandler(handler)
     return logger
@@ -131,7 +162,6 @@ class _Runner:
     def __init__(self, ctx: Context, force_from: str | None, say: Say) -> None:
         self.ctx = ctx
         self.out = ctx.out
-        self.out.mkdir(parents=True, exist_ok=True)
         self.log = StageLog.open(self.out)
         self.logger = file_logger(self.out)
         self.keys = stage_keys(ctx)
@@ -142,16 +172,59 @@ class _Runner:
         if force_from is not None:
             self.log.forget_from(force_from)
 
-    def reuse(self, stage: str) -> bool:
-        """Whether ``stage`` can be read back (and nothing before it was redone)."""
+    def reuse(self, stage: str, load: Callable[[], Any] | None = None) -> tuple[bool, Any]:
+        """Whether ``stage`` can be reused, and its result read back by ``load``.
+
+        A stage is reused when nothing before it was redone, its key is the
+        recorded one, its files are there and whole (their checksums are the
+        recorded ones) and ``load`` reads them; a damaged or unreadable file is
+        said in one line and the stage runs again.
+        """
         ok = not self.stale and self.log.done(stage, self.keys[stage])
+        value = None
+        if ok and (damaged := self.log.damaged(stage)):
+            ok = False
+            self._warn(
+                f"{stage}: {', '.join(damaged)} damaged (size or checksum differs from when it "
+                "was written); computing the stage again"
+            )
+        elif ok and load is not None:
+            try:
+                value = load()
+            except UNREADABLE as exc:
+                ok = False
+                reason = exc.one_line() if isinstance(exc, BayescalError) else repr(exc)
+                self._warn(
+                    f"{stage}: its files cannot be read back ({' '.join(reason.split())[:200]}); "
+                    "computing the stage again"
+                )
         if ok:
             self.reused.append(stage)
             self._note(f"{stage}: up to date, reused{self._when(stage)}")
         else:
             self.stale = True
             self._note(f"{stage}: running")
-        return ok
+        return ok, value
+
+    def _warn(self, text: str) -> None:
+        self.logger.warning(text)
+        self.say(f"warning: {text}")
+
+    def check_snapshots(self, stage: str) -> None:
+        """Say in one line, and remove, the MCMC snapshots of ``stage`` that cannot be
+        read (their chains start again from the beginning rather than from them)."""
+        folder = self.checkpoints(stage)
+        if not folder.is_dir():
+            return
+        for path in sorted(folder.glob("*.npz")):
+            try:
+                read_npz(path)
+            except UNREADABLE:
+                path.unlink(missing_ok=True)
+                self._warn(
+                    f"{stage}: checkpoint {path.relative_to(self.out)} is damaged; its chain "
+                    "starts again from the beginning"
+                )
 
     def _when(self, stage: str) -> str:
         """`` (ran 38.2 s on 2026-11-25 10:31)`` from the record, ``""`` if it does not say."""
@@ -179,8 +252,9 @@ class _Runner:
 
 def _design(r: _Runner) -> Design:
     path = r.out / design_store.FILE
-    if r.reuse("design"):
-        return design_store.load_design(path)
+    ok, found = r.reuse("design", lambda: design_store.load_design(path))
+    if ok:
+        return found
     start = time.perf_counter()
     design = make_design(r.ctx)
     design_store.save_design(design, path)
@@ -189,10 +263,17 @@ def _design(r: _Runner) -> Design:
 
 
 def _simulations(r: _Runner, design: Design) -> RunResults:
-    if r.reuse("simulate"):
-        return runs_store.load_simulations(r.out, design)
+    ok, found = r.reuse("simulate", lambda: runs_store.load_simulations(r.out, design))
+    if ok:
+        return found
     start = time.perf_counter()
     sims = simulate(r.ctx, design)
+    if sims.damaged:
+        first = (Path("simulations") / "runs" / f"{sims.damaged[0]}.npz").as_posix()
+        r._warn(
+            f"simulate: {len(sims.damaged)} cached run(s) could not be read (e.g. {first}: "
+            "truncated or damaged) and were run again"
+        )
     for f in sims.failures:
         r.logger.warning("run %d failed (%s): %s", f.index, f.error_type, f.message)
     if sims.failures:
@@ -215,8 +296,10 @@ def _load_emulator(ctx: Context, sims: RunResults) -> EmulatorResult:
 
 
 def _emulator(r: _Runner, sims: RunResults) -> EmulatorResult:
-    if r.reuse("emulator"):
-        return _load_emulator(r.ctx, sims)
+    ok, found = r.reuse("emulator", lambda: _load_emulator(r.ctx, sims))
+    if ok:
+        return found
+    r.check_snapshots("emulator")
     start = time.perf_counter()
     em = build_emulator(r.ctx, sims, r.checkpoints("emulator"))
     emulator_store.save_emulator(
@@ -239,8 +322,12 @@ def _emulator(r: _Runner, sims: RunResults) -> EmulatorResult:
 
 
 def _calibration(r: _Runner, em: EmulatorResult) -> Posterior:
-    if r.reuse("calibrate"):
-        return posterior_store.load_posterior(r.out / posterior_store.FILE)
+    ok, found = r.reuse(
+        "calibrate", lambda: posterior_store.load_posterior(r.out / posterior_store.FILE)
+    )
+    if ok:
+        return found
+    r.check_snapshots("calibrate")
     start = time.perf_counter()
     post = calibrate_stage(r.ctx, em, checkpoint_dir=r.checkpoints("calibrate"))
     posterior_store.save_posterior(post, r.out / posterior_store.FILE, r.ctx.study.config_hash())
@@ -254,12 +341,13 @@ def _calibration(r: _Runner, em: EmulatorResult) -> Posterior:
 
 def _discrepancy(r: _Runner, em: EmulatorResult, post: Posterior) -> Discrepancy | None:
     if not r.ctx.study.discrepancy.enabled:
-        if not r.reuse("discrepancy"):
+        if not r.reuse("discrepancy")[0]:
             r.finish("discrepancy", [], time.perf_counter())
         return None
     path = r.out / discrepancy_store.FILE
-    if r.reuse("discrepancy"):
-        return discrepancy_store.load_discrepancy(path)
+    ok, found = r.reuse("discrepancy", lambda: discrepancy_store.load_discrepancy(path))
+    if ok:
+        return found
     start = time.perf_counter()
     disc = discrepancy_stage(r.ctx, em, post)
     assert disc is not None  # enabled above
@@ -271,8 +359,9 @@ def _discrepancy(r: _Runner, em: EmulatorResult, post: Posterior) -> Discrepancy
 def _predictions(
     r: _Runner, em: EmulatorResult, post: Posterior, disc: Discrepancy | None
 ) -> Predictions:
-    if r.reuse("predict"):
-        return Predictions(*predictions_store.load_predictions(r.out))
+    ok, found = r.reuse("predict", lambda: Predictions(*predictions_store.load_predictions(r.out)))
+    if ok:
+        return found
     start = time.perf_counter()
     pred = predict_stage(r.ctx, em, post, disc, nominal_run(r.ctx))
     files = predictions_store.save_predictions(r.out, pred.dataset, pred.metrics)
@@ -282,7 +371,7 @@ def _predictions(
 
 def _report(r: _Runner, res: Results) -> Path:
     target = r.out / REPORT_FILE
-    if r.reuse("report"):
+    if r.reuse("report")[0]:
         return target
     start = time.perf_counter()
     path = write_study_report(res)
@@ -354,12 +443,61 @@ def run(
     Returns
     -------
     Results
+
+    Raises
+    ------
+    OutputError
+        If the output folder is in use by another run (its lock,
+        :class:`bayescal.store.folder.OutputLock`), or cannot be written
+        (permission, a full or read-only disk, a file in its place): one line
+        naming the path; what was completed stays, and a new run resumes.
     """
     for name, value in (("from_stage", from_stage), ("until", until)):
         if value is not None and value not in STAGES:
             raise ConfigError(f"{name} must be one of {', '.join(STAGES)}, got {value!r}")
     ctx = prepare(study, options)
-    r = _Runner(ctx, from_stage, say or (lambda _: None))
+    needs = check_budget(study, ctx.measured, ctx.out)  # before any stage allocates
+    tell = say or (lambda _: None)
+    with writing(ctx.out, sum(need.disk for need in needs)):
+        ctx.out.mkdir(parents=True, exist_ok=True)
+        with OutputLock(ctx.out, command="run") as lock:
+            if lock.took_over:
+                tell(lock.describe_taken_over())
+            return _run_stages(ctx, from_stage, until, tell)
+
+
+@contextlib.contextmanager
+def writing(out: Path, disk: float | None = None) -> Iterator[None]:
+    """Turn an OSError of writing ``out`` into one :class:`~bayescal.errors.OutputError`.
+
+    Parameters
+    ----------
+    out
+        The output folder.
+    disk
+        Estimated bytes the study writes in all (for a full disk, what to free). [B]
+    """
+    try:
+        yield
+    except OSError as exc:
+        if not is_output_error(exc, out):
+            raise
+        still = None if disk is None else max(0.0, disk - _held(out))
+        raise output_error(exc, out, still_needed=still) from exc
+
+
+def _held(out: Path) -> int:
+    total = 0
+    if os.path.isdir(out):
+        for path in out.rglob("*"):
+            with contextlib.suppress(OSError):
+                total += path.stat().st_size if path.is_file() else 0
+    return total
+
+
+def _run_stages(ctx: Context, from_stage: str | None, until: str, say: Say) -> Results:
+    study = ctx.study
+    r = _Runner(ctx, from_stage, say)
     r.logger.info("bayescal run of %s (config %s)", study.path, study.config_hash()[:12])
     res = Results(ctx)
     last = STAGES.index(until)
@@ -411,6 +549,10 @@ def load_results(study: Study) -> Results:
     ------
     ConfigError
         If not even the design stage has finished.
+    DataError
+        If a finished stage's file is damaged (its checksum is not the one
+        recorded) or cannot be read back: one line naming it; ``bayescal run``
+        computes the stage again.
     """
     ctx = prepare(study)
     out = ctx.out
@@ -421,23 +563,49 @@ def load_results(study: Study) -> Results:
             f"{out} has no finished calibration (no stage has finished)",
             hint=f"run `bayescal run {study.path}` first",
         )
-    res.design = design_store.load_design(out / design_store.FILE)
+
+    def read(stage: str, load: Callable[[], Any]) -> Any:
+        hint = f"`bayescal run {study.path}` computes the {stage} stage again"
+        damaged = log.damaged(stage)
+        if damaged:
+            raise DataError(
+                f"{out / damaged[0]} is damaged (its size or checksum differs from when it "
+                "was written)",
+                hint=hint,
+            )
+        try:
+            return load()
+        except UNREADABLE as exc:
+            reason = exc.one_line() if isinstance(exc, BayescalError) else repr(exc)
+            raise DataError(
+                f"the files of the {stage} stage in {out} cannot be read back "
+                f"({' '.join(reason.split())[:200]})",
+                hint=hint,
+            ) from exc
+
+    res.design = read("design", lambda: design_store.load_design(out / design_store.FILE))
     if not log.finished("simulate"):
         return res
-    res.simulations = runs_store.load_simulations(out, res.design)
+    design = res.design
+    res.simulations = read("simulate", lambda: runs_store.load_simulations(out, design))
     if not log.finished("emulator"):
         return res
-    res.emulator = _load_emulator(ctx, res.simulations)
+    sims = res.simulations
+    res.emulator = read("emulator", lambda: _load_emulator(ctx, sims))
     if not log.finished("calibrate"):
         return res
-    res.posterior = posterior_store.load_posterior(out / posterior_store.FILE)
+    res.posterior = read(
+        "calibrate", lambda: posterior_store.load_posterior(out / posterior_store.FILE)
+    )
     if not log.finished("discrepancy"):
         return res
     if study.discrepancy.enabled and (out / discrepancy_store.FILE).is_file():
-        res.discrepancy = discrepancy_store.load_discrepancy(out / discrepancy_store.FILE)
+        res.discrepancy = read(
+            "discrepancy", lambda: discrepancy_store.load_discrepancy(out / discrepancy_store.FILE)
+        )
     if not log.finished("predict"):
         return res
-    res.predictions = Predictions(*predictions_store.load_predictions(out))
+    res.predictions = read("predict", lambda: Predictions(*predictions_store.load_predictions(out)))
     if log.finished("report") and (out / REPORT_FILE).is_file():
         res.report = out / REPORT_FILE
     return res

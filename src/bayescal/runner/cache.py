@@ -106,7 +106,12 @@ def _finite_or_none(value: float) -> float | None:
 
 
 def load_run(path: Path, names: tuple[str, ...], n: int) -> dict[str, np.ndarray] | None:
-    """Outputs of a cached run, or ``None`` if absent or unusable (it is then re-run)."""
+    """Outputs of a cached run, or ``None`` if absent or unusable (it is then re-run).
+
+    A truncated file is not a zip archive; a damaged byte fails the CRC-32 that the
+    archive keeps of every array; an archive without the outputs, or with outputs
+    of another length, is unusable too.
+    """
     if not path.is_file():
         return None
     try:

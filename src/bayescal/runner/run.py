@@ -129,6 +129,9 @@ class RunResults:
         Rows whose result was loaded from the cache.
     n_attempts
         Simulator invocations made by this call, failed ones and retries included.
+    damaged
+        Keys of cached runs whose file could not be read (truncated, damaged): they
+        were run again, never used.
     """
 
     design: Design
@@ -139,6 +142,7 @@ class RunResults:
     n_run: int
     n_cached: int
     n_attempts: int
+    damaged: tuple[str, ...] = ()
 
     @property
     def names(self) -> tuple[str, ...]:
@@ -393,11 +397,14 @@ def run_design(
         metadata=metadata,
     )
     names, n = tuple(simulator.output_names), forcing.n
-    todo = []
+    todo, damaged = [], []
     for key in ledger.parameters:
-        cached = load_run(cache / "runs" / f"{key}.npz", names, n)
+        path = cache / "runs" / f"{key}.npz"
+        cached = load_run(path, names, n)
         if cached is None:
             todo.append(key)
+            if path.is_file():  # there, but truncated or damaged: run again, never used
+                damaged.append(key)
         else:
             ledger.loaded(key, cached)
     n_cached = ledger.done
@@ -410,7 +417,7 @@ def run_design(
         context = hashlib.sha256(f"{sim_fp}{forcing_fp}{time.time_ns()}".encode()).hexdigest()
         payload = workers.pickle_payload(simulator, forcing)
         _run_dask(payload, context, todo, ledger, jobs, timeout, scheduler)
-    return _collect(design, keys, ledger, names, n, n_cached)
+    return _collect(design, keys, ledger, names, n, n_cached, tuple(damaged))
 
 
 def _collect(
@@ -420,6 +427,7 @@ def _collect(
     names: tuple[str, ...],
     n: int,
     n_cached: int,
+    damaged: tuple[str, ...] = (),
 ) -> RunResults:
     ok = [i for i, key in enumerate(keys) if key in ledger.outputs]
     outputs = {
@@ -450,4 +458,5 @@ def _collect(
         n_run=len(ok) - n_cached,
         n_cached=n_cached,
         n_attempts=ledger.attempts,
+        damaged=damaged,
     )

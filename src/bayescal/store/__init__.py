@@ -20,8 +20,13 @@ Output folder (the module that writes and reads each file)::
     report/report.html      the report (figures in report/figures/)      bayescal.report
     leave-period-out.npz    per-period scores of bayescal compare        store.crossval
     checkpoints/            MCMC snapshots of an unfinished stage        bayescal.calibration
-    stages.json             what finished, with which key, how long      store.stages
+    stages.json             what finished, with which key, how long,     store.stages
+                            each file's size and SHA-256
     bayescal.log            the log of every run                         bayescal.pipeline
+    bayescal.lock           held while a run writes the folder           store.folder
+
+A write that fails (permission, a full or read-only disk) becomes one line
+naming the path (:func:`bayescal.store.folder.output_error`).
 """
 
 from bayescal.store.design import load_design, save_design

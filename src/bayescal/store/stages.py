@@ -1,14 +1,21 @@
 """The stage record of a study's output folder: ``stages.json``.
 
 When a stage finishes, its key (:mod:`bayescal.pipeline.keys`), the files it
-wrote, how long it ran and when it finished are recorded in ``stages.json``
-(written atomically after the stage's own files). A later run reuses a stage
-when its recorded key equals the key it would compute now and all its files
-exist; otherwise it runs the stage again, and with it every stage after it.
+wrote with their size and SHA-256, how long it ran and when it finished are
+recorded in ``stages.json`` (written atomically after the stage's own files).
+A later run reuses a stage when its recorded key equals the key it would
+compute now and all its files exist; otherwise it runs the stage again, and
+with it every stage after it. A file whose size or checksum is no longer the
+recorded one (a disk that filled, a copy interrupted, a bit flipped) is
+*damaged* (:meth:`StageLog.damaged`): the runner says so and computes the stage
+again, never using it. Records written before checksums were kept have none;
+their files are checked by loading them.
 """
 
 from __future__ import annotations
 
+import hashlib
+import os
 import time
 from collections.abc import Iterable
 from dataclasses import dataclass, field
@@ -18,7 +25,7 @@ from typing import Any, Final
 
 from bayescal.atomic import atomic_write_json, read_json
 
-__all__ = ["RECORD", "STAGES", "StageLog", "StageRun"]
+__all__ = ["RECORD", "STAGES", "StageLog", "StageRun", "file_sha256"]
 
 #: Stages in order (``--from`` takes one of these).
 STAGES: Final = ("design", "simulate", "emulator", "calibrate", "discrepancy", "predict", "report")
@@ -88,11 +95,40 @@ class StageLog:
             finished = None
         return StageRun(seconds, finished)
 
+    def damaged(self, stage: str) -> list[str]:
+        """The files of ``stage`` whose size or SHA-256 differ from those recorded when
+        they were written (none where the record keeps no checksums); a missing file
+        is not damaged but absent (:meth:`finished` says so)."""
+        rec = self.records.get(stage) or {}
+        sums = rec.get("sha256")
+        if not isinstance(sums, dict):
+            return []
+        recorded = rec.get("sizes")
+        sizes: dict[str, Any] = recorded if isinstance(recorded, dict) else {}
+        bad = []
+        for name, expected in sorted(sums.items()):
+            path = self.folder / name
+            try:
+                resized = sizes.get(name) is not None and path.stat().st_size != sizes[name]
+                if resized or file_sha256(path) != expected:
+                    bad.append(name)
+            except FileNotFoundError:
+                continue
+            except OSError:
+                bad.append(name)
+        return bad
+
     def finish(self, stage: str, key: str, files: Iterable[str], seconds: float) -> None:
-        """Record ``stage`` as finished (after its files are written)."""
+        """Record ``stage`` as finished (after its files are written), with the size and
+        SHA-256 of each of its files."""
+        names = sorted(files)
+        paths = {name: self.folder / name for name in names}
+        present = {name: path for name, path in paths.items() if path.is_file()}
         self.records[stage] = {
             "key": key,
-            "files": sorted(files),
+            "files": names,
+            "sizes": {name: path.stat().st_size for name, path in present.items()},
+            "sha256": {name: file_sha256(path) for name, path in present.items()},
             "seconds": round(float(seconds), 3),
             "finished": time.strftime(_FINISHED),
         }
@@ -103,3 +139,12 @@ class StageLog:
         later = STAGES[STAGES.index(stage) :]
         self.records = {k: v for k, v in self.records.items() if k not in later}
         atomic_write_json(self.folder / RECORD, self.records)
+
+
+def file_sha256(path: str | os.PathLike[str]) -> str:
+    """SHA-256 (hex) of a file's bytes, read in blocks."""
+    digest = hashlib.sha256()
+    with open(path, "rb") as stream:
+        for block in iter(lambda: stream.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()

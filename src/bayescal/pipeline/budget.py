@@ -1,0 +1,331 @@
+"""Memory and disk a study will need, estimated before anything is allocated.
+
+Every size a study sets (``[design] runs``, the record's samples and periods,
+``[emulator] samples`` and basis size, ``[calibration] chains`` x ``samples``,
+``[discrepancy]`` realisations and samples, ``[predict]`` draws and runs)
+implies arrays in memory and files in the output folder. :func:`estimate`
+adds up the largest of them from the validated study and its measured data,
+and :func:`check_budget` refuses, in one line naming the key at fault and the
+estimate, a study that would not fit: ``bayescal validate`` calls it, and
+``bayescal run`` before its first stage.
+
+The limits are, in this order: ``[runner] max_memory`` / ``max_disk`` of the
+study, the environment variables ``BAYESCAL_MAX_MEMORY`` / ``BAYESCAL_MAX_DISK``
+(sizes such as ``"64GiB"``: a big machine's or a cluster node's own limits),
+else what this machine has: its physical memory (or the container's limit,
+whichever is lower) and the free space of the output folder's file system plus
+what the output folder already holds (a resumed run rewrites it).
+
+The estimates count float64 arrays and the files bayescal writes; they are
+lower bounds of the real peak (Python objects, temporary copies and libraries
+come on top) and are meant to catch sizes that are wrong by orders of
+magnitude, such as ``runs = 1000000000``.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import shutil
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from pydantic import ByteSize, TypeAdapter, ValidationError
+
+from bayescal.errors import ConfigError
+
+if TYPE_CHECKING:
+    from bayescal.config import Study
+    from bayescal.data.measured import MeasuredData
+
+__all__ = [
+    "DISK_VARIABLE",
+    "MEMORY_VARIABLE",
+    "Need",
+    "check_budget",
+    "estimate",
+    "format_bytes",
+    "machine_memory",
+]
+
+MEMORY_VARIABLE = "BAYESCAL_MAX_MEMORY"
+DISK_VARIABLE = "BAYESCAL_MAX_DISK"
+_F = 8  # bytes of a float64
+_X_PER_SERIES = 3  # variable inputs per boundary series (its PCA components), a typical count
+_FIXED_DISK = 20e6  # report, figures, logs, JSON records [B]
+
+
+@dataclass(frozen=True)
+class Need:
+    """What one part of a study needs.
+
+    Attributes
+    ----------
+    what
+        The part (``"simulations"``).
+    key
+        The study key whose size drives it (``"design.runs"``).
+    detail
+        How the size arises (``"30 runs × 1644 samples × 1 output"``).
+    memory, disk
+        Estimated bytes in memory and in the output folder. [B]
+    """
+
+    what: str
+    key: str
+    detail: str
+    memory: float
+    disk: float
+
+
+def format_bytes(size: float) -> str:
+    """``23.4 GiB``, ``512 B``, ``3.1e+06 TiB``."""
+    for unit, scale in (("TiB", 2.0**40), ("GiB", 2.0**30), ("MiB", 2.0**20), ("KiB", 2.0**10)):
+        if size >= scale:
+            value = size / scale
+            return f"{value:.3g} {unit}" if value < 1e4 else f"{value:.2e} {unit}"
+    return f"{size:.0f} B"
+
+
+def estimate(study: Study, measured: MeasuredData) -> list[Need]:
+    """Memory and disk of each part of ``study`` on its measured record.
+
+    Returns
+    -------
+    list of Need
+        One entry per part, largest-memory first.
+    """
+    s = study
+    t, runs, n = len(s.parameters), int(s.design.runs), int(measured.n)
+    outputs_sim = max(len(s.simulator.output_names()), len(s.outputs.calibrate))
+    q = len(s.outputs.calibrate)
+    lay = measured.layout
+    period, m = int(lay.period), int(lay.m_star)
+    m_all = m + int(lay.test_starts.size)
+    rows = q * period  # N: the stacked within-period axis
+    columns = runs * m  # R m*: every run cut into the training periods
+    em = s.emulator
+    basis = min(em.pca_components or 20, rows, max(columns, 1))
+    r = len(s.boundary_conditions) * (em.history_periods + 1) * _X_PER_SERIES
+    hyper = basis * (t + r + 1) + 1
+    cal = s.calibration
+    kept = cal.chains * cal.samples
+    d_samples = s.discrepancy_lengths()[1]
+    predict = s.predict
+    word = "output" if outputs_sim == 1 else "outputs"
+    needs = [
+        Need("design", "design.runs", f"{runs} runs × {t} parameters", 2.0 * runs * t * _F, 0.0),
+        Need(
+            "simulations",
+            "design.runs",
+            f"{runs} runs × {n} samples × {outputs_sim} {word}",
+            2.0 * runs * outputs_sim * n * _F,
+            2.0 * runs * (outputs_sim * n * _F + 4096.0),  # per-run cache + simulations.npz
+        ),
+        Need(
+            "emulator data",
+            "design.runs",
+            f"{rows} rows × {runs} runs × {m} periods",
+            3.0 * rows * columns * _F,
+            (rows + basis) * columns * _F,
+        ),
+    ]
+    if em.algebra == "dense":
+        needs.append(
+            Need(
+                "dense emulator algebra",
+                "emulator.algebra",
+                f"('dense') ({runs} runs × {m} periods)² per basis vector",
+                3.0 * float(columns) ** 2 * _F,
+                0.0,
+            )
+        )
+    else:
+        pieces = basis * (float(runs) ** 2 + float(m) ** 2 + 2.0 * columns) * _F
+        needs.append(
+            Need(
+                "emulator algebra",
+                "design.runs",
+                f"{basis} basis vectors × ({runs}² + {m}² + 2 × {runs} × {m})",
+                2.0 * pieces,
+                pieces,
+            )
+        )
+    emulator_draws = 2.0 * em.samples * hyper * _F
+    needs += [
+        Need(
+            "emulator draws",
+            "emulator.samples",
+            f"2 chains × {em.samples} samples × {hyper} hyperparameters",
+            emulator_draws,
+            emulator_draws,
+        ),
+        Need(
+            "calibration draws",
+            "calibration.samples",
+            f"{cal.chains} chains × {cal.samples} samples × {t + 4} variables",
+            3.0 * kept * (t + 4) * _F,
+            3.0 * kept * (t + 4) * _F,  # posterior.nc (twice) and the checkpoints
+        ),
+    ]
+    if s.discrepancy.enabled:
+        disc = s.discrepancy
+        draws = cal.chains * d_samples * (t + 4 + disc.realisations // 10 + 1)
+        needs.append(
+            Need(
+                "discrepancy",
+                "discrepancy.realisations",
+                f"{disc.realisations} realisations × {m} periods × {rows} rows, "
+                f"{cal.chains} chains × {d_samples} samples",
+                (2.0 * disc.realisations * m * rows + draws) * _F,
+                (disc.realisations * m_all * rows + draws) * _F,
+            )
+        )
+    if predict.method == "simulator":
+        needs.append(
+            Need(
+                "predictions",
+                "predict.runs",
+                f"{predict.runs} runs × {n} samples × {outputs_sim} {word}",
+                2.0 * predict.runs * outputs_sim * n * _F,
+                predict.runs * (outputs_sim * n * _F + 4096.0) + 20.0 * q * n * _F,
+            )
+        )
+    else:
+        needs.append(
+            Need(
+                "predictions",
+                "predict.draws",
+                f"{predict.draws} draws × {m_all} periods × {rows} rows",
+                2.0 * predict.draws * m_all * rows * _F,
+                20.0 * q * n * _F,
+            )
+        )
+    needs.append(Need("report and records", "", "", 0.0, _FIXED_DISK))
+    return sorted(needs, key=lambda need: -need.memory)
+
+
+def machine_memory() -> int | None:
+    """Physical memory of this machine, or its container's limit where lower. [B]"""
+    limits = []
+    with contextlib.suppress(AttributeError, OSError, ValueError):  # not POSIX
+        limits.append(os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES"))
+    for path in ("/sys/fs/cgroup/memory.max", "/sys/fs/cgroup/memory/memory.limit_in_bytes"):
+        try:
+            text = Path(path).read_text(encoding="ascii").strip()
+        except OSError:
+            continue
+        if text.isdigit() and int(text) < 2**60:  # "max" or a huge number: no limit
+            limits.append(int(text))
+    return min(limits) if limits else None
+
+
+def _free_disk(folder: Path) -> tuple[int | None, int]:
+    """Free bytes on the file system of ``folder`` (its nearest existing parent), and the
+    bytes ``folder`` holds already."""
+    probe = folder
+    while not os.path.exists(probe) and probe != probe.parent:  # no OSError (too long)
+        probe = probe.parent
+    try:
+        free: int | None = shutil.disk_usage(probe).free
+    except OSError:
+        free = None
+    held = 0
+    if os.path.isdir(folder):
+        for path in folder.rglob("*"):
+            with contextlib.suppress(OSError):
+                held += path.stat().st_size if path.is_file() else 0
+    return free, held
+
+
+def _limit(given: int | None, variable: str, key: str) -> tuple[int | None, str]:
+    """The limit set by the study or the environment variable, and where it comes from."""
+    if given is not None:
+        return int(given), f"[runner] {key}"
+    text = os.environ.get(variable)
+    if text:
+        try:
+            return int(TypeAdapter(ByteSize).validate_python(text.strip())), variable
+        except ValidationError:
+            raise ConfigError(
+                f"{variable}={text!r} is not a size",
+                hint=f"write it like '64GiB' or '500GB', e.g. {variable}=64GiB",
+            ) from None
+    return None, ""
+
+
+def check_budget(study: Study, measured: MeasuredData, out: Path | None = None) -> list[Need]:
+    """Refuse a study whose estimated memory or disk exceeds the limits.
+
+    Parameters
+    ----------
+    study
+        A validated study.
+    measured
+        Its measured data (the record's length and periods size the arrays).
+    out
+        The output folder (its file system's free space is the disk limit);
+        ``study.root / study.study.output_dir`` when omitted.
+
+    Returns
+    -------
+    list of Need
+        The estimates (:func:`estimate`).
+
+    Raises
+    ------
+    ConfigError
+        One line: the key at fault and its value, the estimate, the limit, and
+        how to raise it.
+    """
+    needs = estimate(study, measured)
+    folder = out if out is not None else study.root / study.study.output_dir
+    memory = sum(need.memory for need in needs)
+    limit, origin = _limit(study.runner.max_memory, MEMORY_VARIABLE, "max_memory")
+    if limit is None:
+        limit, origin = machine_memory(), "this machine"
+    if limit is not None and memory > limit:
+        setting = (
+            f"raise {origin}"
+            if origin != "this machine"
+            else f"set [runner] max_memory (or {MEMORY_VARIABLE}) where a bigger machine runs it"
+        )
+        raise _error(
+            study, needs, "memory", memory, f"the {format_bytes(limit)} of {origin}", setting
+        )
+    disk = sum(need.disk for need in needs)
+    limit, origin = _limit(study.runner.max_disk, DISK_VARIABLE, "max_disk")
+    text = f"the {format_bytes(limit or 0)} of {origin}"
+    setting = f"raise {origin}"
+    if limit is None:
+        free, held = _free_disk(folder)
+        limit = None if free is None else free + held
+        text = f"the {format_bytes(limit or 0)} free for {folder}"
+        setting = (
+            f"free space on that disk, or set study.output_dir to a bigger one ([runner] "
+            f"max_disk or {DISK_VARIABLE} set the limit by hand)"
+        )
+    if limit is not None and disk > limit:
+        raise _error(study, needs, "disk", disk, text, setting)
+    return needs
+
+
+def _error(
+    study: Study, needs: list[Need], kind: str, total: float, limit: str, setting: str
+) -> ConfigError:
+    """``design.runs = 1000000000: the study needs about ... of memory (...), more than ...``."""
+    value = (lambda need: need.memory) if kind == "memory" else (lambda need: need.disk)
+    worst = max((need for need in needs if need.key), key=value)
+    parts = [
+        f"{need.what} {format_bytes(value(need))}" + (f": {need.detail}" if need is worst else "")
+        for need in sorted(needs, key=lambda need: -value(need))[:3]
+        if value(need) > 0
+    ]
+    section, key = worst.key.split(".")
+    shown = getattr(getattr(study, section), key)
+    return ConfigError(
+        f"{worst.key} = {shown!r}: the study needs about {format_bytes(total)} of {kind} "
+        f"({'; '.join(parts)}), more than {limit}; lower {worst.key}, or {setting}",
+        source=str(study.path),
+    )

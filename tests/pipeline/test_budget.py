@@ -1,0 +1,94 @@
+"""The memory and disk a study's sizes imply, refused before anything is allocated."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from bayescal.config import load_study
+from bayescal.data import load_measured
+from bayescal.errors import ConfigError
+from bayescal.examples import copy_example
+from bayescal.pipeline import Options, run
+from bayescal.pipeline.budget import (
+    DISK_VARIABLE,
+    MEMORY_VARIABLE,
+    check_budget,
+    estimate,
+    format_bytes,
+    machine_memory,
+)
+
+
+def _wall(tmp_path: Path, *edits: tuple[str, str]) -> Path:
+    folder = copy_example("wall", tmp_path / "wall")
+    path = folder / "study.toml"
+    text = path.read_text(encoding="utf-8")
+    for old, new in edits:
+        assert old in text
+        text = text.replace(old, new)
+    path.write_text(text, encoding="utf-8")
+    return folder
+
+
+def test_the_estimate_counts_the_arrays_the_study_makes(tmp_path: Path) -> None:
+    study = load_study(_wall(tmp_path))
+    measured = load_measured(study)
+    needs = {need.what: need for need in estimate(study, measured)}
+    # the stacked simulations: runs x samples x outputs float64, twice (cache and stack)
+    assert needs["simulations"].memory == 2 * 30 * measured.n * 1 * 8
+    assert needs["design"].memory == 2 * 30 * 3 * 8
+    assert needs["simulations"].key == "design.runs"
+    total = sum(need.memory for need in needs.values())
+    assert total < 100 * 2**20  # the shipped example is small
+    assert format_bytes(22.4 * 2**30) == "22.4 GiB"
+    assert format_bytes(512) == "512 B"
+
+
+def test_a_billion_runs_are_refused_before_the_output_folder_exists(tmp_path: Path) -> None:
+    folder = _wall(tmp_path, ("runs = 30", "runs = 1000000000"))
+    study = load_study(folder)
+    with pytest.raises(ConfigError, match=r"design\.runs = 1000000000: .* of memory") as info:
+        run(study, options=Options(backend="serial"))
+    assert "\n" not in str(info.value)
+    assert not (folder / "out").exists()
+
+
+def test_the_limit_is_the_studys_then_the_environments_then_the_machines(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    folder = _wall(tmp_path, ("runs = 30", "runs = 3000"))
+    study = load_study(folder)
+    measured = load_measured(study)
+    need = sum(n.memory for n in estimate(study, measured))
+    assert need > 2**30  # the run correlations alone: basis x 3000²
+    monkeypatch.setenv(MEMORY_VARIABLE, "100MiB")
+    with pytest.raises(ConfigError, match=rf"more than the 100 MiB of {MEMORY_VARIABLE}"):
+        check_budget(study, measured)
+    monkeypatch.setenv(MEMORY_VARIABLE, "1TiB")
+    check_budget(study, measured)  # a big machine says so
+    monkeypatch.setenv(MEMORY_VARIABLE, "a lot")
+    with pytest.raises(ConfigError, match=rf"{MEMORY_VARIABLE}='a lot' is not a size"):
+        check_budget(study, measured)
+    monkeypatch.delenv(MEMORY_VARIABLE)
+    runner = 'runs = 50\n\n[runner]\nmax_memory = "100MiB"'
+    limited = load_study(_wall(tmp_path / "b", ("runs = 30", "runs = 3000"), ("runs = 50", runner)))
+    monkeypatch.setenv(MEMORY_VARIABLE, "1TiB")  # the study's own setting wins
+    with pytest.raises(ConfigError, match=r"more than the 100 MiB of \[runner\] max_memory"):
+        check_budget(limited, measured)
+    assert machine_memory() is None or machine_memory() > 2**20
+
+
+def test_disk_is_checked_against_the_free_space_of_the_output_folder(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    study = load_study(_wall(tmp_path))
+    measured = load_measured(study)
+    monkeypatch.setattr("shutil.disk_usage", lambda _: type("U", (), {"free": 2**20})())
+    with pytest.raises(ConfigError, match=r"of disk .* more than the 1 MiB free for .*out"):
+        check_budget(study, measured)
+    monkeypatch.setenv(DISK_VARIABLE, "1GiB")
+    needs = check_budget(study, measured)
+    assert np.isfinite(sum(n.disk for n in needs))
