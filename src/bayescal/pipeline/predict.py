@@ -141,12 +141,13 @@ def _mixture_band(
     return band
 
 
-def _thin(posterior: Posterior, n: int) -> tuple[np.ndarray, np.ndarray]:
-    """``n`` draws spread evenly over all chains: theta* ``(n, t)`` and lambda* ``(n, O)``."""
+def _thin(posterior: Posterior, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``n`` draws spread evenly over all chains: theta* ``(n, t)``, lambda* ``(n, O)``
+    and the draws' indices in the flattened draws."""
     theta = posterior.draws.reshape(-1, len(posterior.names))
     lam_stars = posterior.lam_stars.reshape(theta.shape[0], -1)
     pick = np.unique(np.linspace(0, theta.shape[0] - 1, min(n, theta.shape[0])).astype(int))
-    return theta[pick], lam_stars[pick]
+    return theta[pick], lam_stars[pick], pick
 
 
 def _period_moments(
@@ -221,7 +222,10 @@ def predict_band(
     Band
         NaN outside the training periods and the test window.
     """
-    theta, lam_stars = _thin(posterior, draws)
+    theta, lam_stars, pick = _thin(posterior, draws)
+    model_error = {
+        o: v[pick] for o, v in likelihood_delta_variance(emulator, assembled, posterior).items()
+    }
     layout = assembled.layout
     parts = [(assembled.x, layout.train_starts, 0)]
     if layout.test_starts.size:
@@ -237,6 +241,8 @@ def predict_band(
         for name, sl in slices.items():
             _place(layout, starts, mean[:, sl], means[name], begin)
             _place(layout, starts, var[:, sl], variances[name], begin)
+    for name, extra in model_error.items():
+        variances[name] = variances[name] + extra
     return _mixture_band(means, variances, measured or {}, level)
 
 
@@ -249,6 +255,51 @@ def _phase_sd(assembled: Assembled, name: str) -> np.ndarray:
     return np.asarray(sd[(np.arange(layout.n_total) - anchor) % layout.period])
 
 
+def likelihood_delta_variance(
+    emulator: Emulator, assembled: Assembled, posterior: Posterior
+) -> dict[str, np.ndarray]:
+    """Variance of the in-likelihood discrepancy per draw and sample, in physical units.
+
+    An output declared with ``[outputs.errors.NAME] discrepancy = true`` carries
+    a discrepancy ``GP(0, r tau_j^-1 c_x)`` on each of its basis weights
+    (:class:`~bayescal.emulator.noise.OutputNoise`). A measurement of a new
+    period then differs from the model by ``K delta`` besides the noise, whose
+    variance at sample ``i`` is ``s_i^2 sum_j K_ij^2 r / tau_j`` (``s_i`` the
+    output's standardisation SD). The discrepancy's prior variance is used (it
+    is not conditioned on the training residuals): the band is wider, never
+    narrower, than the conditioned one.
+
+    Returns
+    -------
+    dict
+        Output name -> ``(S, n_total)`` for the posterior's ``S`` draws (flattened
+        over chains), only for outputs with such a discrepancy; empty for draws
+        without its ``r`` (those of the difference-process phase).
+    """
+    obs = assembled.observations
+    names = obs.names()
+    rel_names = names[len(names) - len(obs.delta_outputs) :]
+    if not obs.delta_outputs or not set(rel_names) <= set(posterior.aux_names):
+        # none, or draws without them (the difference-process phase, whose own
+        # Delta takes the discrepancy's place in the corrected prediction)
+        return {}
+    aux = np.asarray(posterior.aux, dtype=float).reshape(-1, len(posterior.aux_names))
+    variances = np.array([k.variance for k in emulator.kernels])
+    k = np.asarray(emulator.basis.k, dtype=float)
+    layout = assembled.layout
+    anchor = int(layout.test_starts[0]) if layout.test_starts.size else int(layout.train_starts[0])
+    phase = (np.arange(layout.n_total) - anchor) % layout.period
+    out = {}
+    for q, rel_name in zip(obs.delta_outputs, rel_names, strict=True):
+        name = obs.outputs[q].name
+        bases = list(obs.outputs[q].bases)
+        sl = assembled.outputs.slices[name]
+        per_row = (k[sl][:, bases] ** 2) @ variances[bases] * assembled.outputs.sd[sl] ** 2
+        r = aux[:, posterior.aux_names.index(rel_name)]
+        out[name] = r[:, None] * per_row[phase][None, :]
+    return out
+
+
 def simulator_band(
     assembled: Assembled,
     runs: Mapping[str, np.ndarray],
@@ -257,6 +308,7 @@ def simulator_band(
     level: float = 0.95,
     discrepancy: DiscrepancyModel | None = None,
     measured: Mapping[str, np.ndarray] | None = None,
+    model_error: Mapping[str, np.ndarray] | None = None,
 ) -> Band:
     """Calibrated prediction from simulator runs at posterior draws, with its bands.
 
@@ -275,6 +327,9 @@ def simulator_band(
         A fitted difference process to add (its mean and variance).
     measured
         Output name -> measured series ``(n_total,)`` for the PIT (optional).
+    model_error
+        Output name -> variance ``(S, n_total)`` of an in-likelihood discrepancy
+        at the same draws (:func:`likelihood_delta_variance`), added to the noise.
 
     Returns
     -------
@@ -299,6 +354,8 @@ def simulator_band(
         column = lam[:, order.index(name) if lam.shape[1] > 1 else 0]
         var = _phase_sd(assembled, name) ** 2 / column[:, None]
         mean = np.asarray(sims, dtype=float)
+        if model_error and name in model_error:
+            var = var + model_error[name]
         if delta_mean is not None and delta_var is not None:
             mean = mean + delta_mean[name][None]
             var = var + delta_var[name][None]

@@ -40,6 +40,7 @@ from bayescal.pipeline.predict import (
     Band,
     delta_series,
     held_out_band,
+    likelihood_delta_variance,
     merge_bands,
     metrics_table,
     predict_band,
@@ -405,14 +406,18 @@ def held_out_sd(ctx: Context, name: str) -> float:
 
 def posterior_runs(
     ctx: Context, posterior: Posterior, n: int
-) -> tuple[dict[str, np.ndarray], np.ndarray]:
-    """The simulator at ``n`` posterior draws (thinned evenly): outputs and their lambda*s."""
+) -> tuple[dict[str, np.ndarray], np.ndarray, np.ndarray]:
+    """The simulator at ``n`` posterior draws (thinned evenly).
+
+    Returns the outputs of the runs that succeeded, their lambda*s and their
+    draws' indices in the posterior's flattened draws.
+    """
     theta = posterior.draws.reshape(-1, len(posterior.names))
     lam_stars = posterior.lam_stars.reshape(theta.shape[0], -1)
     pick = np.unique(np.linspace(0, theta.shape[0] - 1, min(n, theta.shape[0])).astype(int))
     design = Design.from_values(ctx.priors, theta[pick])
     res = simulate(ctx, design)
-    return res.outputs, lam_stars[pick][res.indices]
+    return res.outputs, lam_stars[pick][res.indices], pick[res.indices]
 
 
 def _band(
@@ -427,7 +432,8 @@ def _band(
     # their conditions only the simulator is trustworthy (Twin House test week:
     # emulator + Delta RMSE 2.25 W/m², simulator + Delta see docs/case-studies.md).
     if section.method == "simulator":
-        runs, lam_star = posterior_runs(ctx, posterior, section.runs)
+        runs, lam_star, drawn = posterior_runs(ctx, posterior, section.runs)
+        model_error = likelihood_delta_variance(em.emulator, em.assembled, posterior)
         band = simulator_band(
             em.assembled,
             {o: runs[o] for o in em.emulator.outputs.names},
@@ -435,6 +441,7 @@ def _band(
             level=section.level,
             discrepancy=discrepancy,
             measured=measured,
+            model_error={o: v[drawn] for o, v in model_error.items()},
         )
         held = ctx.study.outputs.held_out
         if discrepancy is not None or not held:
