@@ -7,11 +7,12 @@ BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed-stamp
 EXTRAS ?= dev,energyplus,dask,fmu
 
-.PHONY: demo test test-fast check bench docs clean help
+.PHONY: demo test test-fast validate check bench docs clean help
 
 help:
 	@echo "make demo   - set up .venv and run the paper's wall example end to end"
 	@echo "make test   - set up .venv and run the whole test suite"
+	@echo "make validate - known-truth coverage at full size (10 truths per experiment, ~25 min)"
 	@echo "make check  - ruff (lint + format check) and mypy"
 	@echo "make bench  - the quick benchmark set (ratios measured in one process)"
 
@@ -28,6 +29,12 @@ demo: $(STAMP)
 
 test: $(STAMP)
 	$(BIN)/python -m pytest
+
+# The coverage experiments of tests/validation at the size of issue 15's acceptance;
+# `make test` runs the same tests over 2 truths each.
+validate: $(STAMP)
+	OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 BAYESCAL_VALIDATION_TRUTHS=10 \
+		$(BIN)/python -m pytest tests/validation
 
 test-fast: $(STAMP)
 	$(BIN)/python -m pytest -m "not slow"

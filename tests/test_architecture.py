@@ -24,6 +24,7 @@ FLOORS: dict[str, int] = {
     "errors": 0,
     "__init__": 1,
     "units": 1,
+    "expressions": 1,
     "optional": 1,
     "atomic": 1,
     "clock": 1,

@@ -14,8 +14,11 @@ Definitions (``e = simulated - measured``, over the ``n`` scored samples):
   the absolute mean, so it stays positive for series with a negative mean (a
   heat flux out of a room).
 
-The prediction stage adds ``coverage95`` (share of measured samples inside the
-95 % band) and ``guideline14`` (:func:`meets_guideline14`).
+The prediction stage adds ``coverage95`` and ``coverage50`` (shares of measured
+samples inside the 95 % and 50 % bands of the predictive distribution; honest
+bands give about 0.95 and 0.50), ``pit_ks`` (the largest distance between the
+empirical distribution of the PIT values and the uniform one: small when the
+predictive distribution is right) and ``guideline14`` (:func:`meets_guideline14`).
 
 :data:`METRIC_COLUMNS` is the one list of metric columns: their names (the
 columns of ``metrics.csv``), labels, units and descriptions. Every table of
@@ -199,6 +202,23 @@ METRIC_COLUMNS: Final = (
         scale=100.0,
     ),
     MetricColumn(
+        "coverage50",
+        "cover50",
+        "coverage of 50 % band [%]",
+        "1",
+        "share of the measured samples inside the 50 % band",
+        scale=100.0,
+    ),
+    MetricColumn(
+        "pit_ks",
+        "PIT KS",
+        "PIT distance from uniform",
+        "1",
+        "largest gap between the PIT values' distribution and the uniform one "
+        "(Kolmogorov-Smirnov distance; residuals are autocorrelated, so no p-value)",
+        digits=3,
+    ),
+    MetricColumn(
         "guideline14",
         "G14",
         "meets Guideline 14",
@@ -214,7 +234,7 @@ KEY_COLUMNS: Final = ("output", "model", "window")
 MODELS: Final = ("nominal", "calibrated", "calibrated+delta")
 
 _ERRORS = ("mse", "rmse", "mean_abs_error", "max_abs_error")
-_BANDS = ("coverage95", "guideline14")
+_BANDS = ("coverage95", "coverage50", "pit_ks", "guideline14")
 _TABLES: dict[str, tuple[str, ...]] = {
     "csv": tuple(c.name for c in METRIC_COLUMNS),
     "show": (*_ERRORS, "cv_rmse", "nmbe", *_BANDS),

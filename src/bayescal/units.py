@@ -93,6 +93,27 @@ def same_scale(unit: str, dimension: str) -> bool:
     return known is not None and known.dimension == dimension and known.scale == 1.0
 
 
+def spread_to_internal(value: float, unit: str, dimension: str) -> float:
+    """A spread (standard deviation, difference) in ``unit`` in the internal unit.
+
+    Only the scale applies: 0.2 K of noise is 0.2 °C of noise, not -272.95 °C.
+
+    Raises
+    ------
+    bayescal.errors.DataError
+        For an unknown unit or one of another dimension.
+    """
+    known = _UNITS.get(unit)
+    if known is None:
+        raise DataError(f"unknown unit {unit!r}; known: {', '.join(known_units())}")
+    if known.dimension != dimension:
+        raise DataError(
+            f"{unit!r} is a {known.dimension.replace('_', ' ')} unit, expected "
+            f"{dimension.replace('_', ' ')}"
+        )
+    return float(value) * known.scale
+
+
 def to_internal(values: npt.ArrayLike, unit: str, *, dimension: str | None = None) -> np.ndarray:
     """Convert values in ``unit`` to the internal unit of its dimension.
 

@@ -76,15 +76,18 @@ def test_serial_processes_and_vectorised_give_the_same_draws(
     small: tuple[Assembled, Emulator], tmp_path: Path
 ) -> None:
     a, em = small
+    backends = ("serial", "processes", "vectorised", "vectorised-processes", "auto")
     runs = [
-        calibrate(em, a, n_chains=4, n_burn=30, n_draws=20, seed=9, backend=b)
-        for b in ("serial", "processes", "vectorised")
+        calibrate(em, a, n_chains=4, n_burn=30, n_draws=20, seed=9, backend=b)  # type: ignore[arg-type]
+        for b in backends
     ]
     np.testing.assert_array_equal(runs[0].draws, runs[1].draws)
-    # Lockstep chains: the batched likelihood equals the scalar one to rounding, so
-    # the accept/reject decisions, and with them the draws, are the same.
-    np.testing.assert_array_equal(runs[0].draws, runs[2].draws)
-    np.testing.assert_allclose(runs[0].log_density, runs[2].log_density, rtol=1e-12)
+    # Lockstep chains (all in one group, or one group per worker; "auto" is one of
+    # these here): the batched likelihood equals the scalar one to rounding, so the
+    # accept/reject decisions, and with them the draws, are the same.
+    for run in runs[2:]:
+        np.testing.assert_array_equal(runs[0].draws, run.draws)
+        np.testing.assert_allclose(runs[0].log_density, run.log_density, rtol=1e-12)
     assert runs[0].draws.shape == (4, 20, 3)
     # Lockstep chains checkpoint too: killed after 37 of 50 sweeps (a snapshot after
     # the first batch of 25), they resume to the same draws.

@@ -3,7 +3,7 @@
 The measurements live in ``../shared/data`` beside the repository (never in it);
 the pipeline tests skip where that folder is absent. References are independent
 of the emulator and the MCMC: the catalogue values of ``shared/data/README.md``
-and a direct least-squares fit of the simulator to the same training data.
+and the measured temperature inside the wall, which the calibration never sees.
 """
 
 from __future__ import annotations
@@ -13,11 +13,9 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
-from scipy.optimize import least_squares
 
 from bayescal import examples
 from bayescal.config import WallSimulator, load_study
-from bayescal.emulator.assemble import runs_to_columns
 from bayescal.examples import copy_example
 from bayescal.pipeline import Options, Results, run
 from paths import SHARED_DATA
@@ -38,12 +36,8 @@ CATALOGUE = [
 ]
 
 #: Reduced sizes: the full 50 runs (with 25, one chain stuck in a spurious mode of the
-#: cruder emulator at a corner of the prior) and short chains; enough for the five
-#: parameters that the 27 training days identify sharply. NUTS as in the example
-#: (the posterior is correlated: Metropolis-within-Gibbs with 4 x (400 + 600) left
-#: R-hat 2.1; JAX comes with the dev extra that `make test` installs). The
-#: difference process is on, with short chains, so that all three models are
-#: compared.
+#: cruder emulator at a corner of the prior) and short chains. The example's AR(1)
+#: errors need Metropolis-within-Gibbs (with its joint move of the five parameters).
 REDUCED = """
 [design]
 runs = 50
@@ -56,14 +50,12 @@ samples = 150
 
 [calibration]
 chains = 4
-sampler = "nuts"
-burn = 300
-samples = 500
+sampler = "mwg"
+burn = 400
+samples = 400
 
 [discrepancy]
-enabled = true
-burn = 400
-samples = 600
+enabled = false
 
 [predict]
 method = "simulator"
@@ -93,6 +85,9 @@ def test_example_is_listed_ships_no_data_and_uses_the_catalogue() -> None:
         assert p.prior.lower < value < p.prior.upper, target
     assert study.periods.test_fraction == 0.2
     assert study.predict.method == "simulator"
+    # The temperature inside the wall is a held-out sensor, the flux has AR(1) errors.
+    assert study.outputs.held_out == ["temp_interface_2"]
+    assert study.outputs.errors["heat_flux_in"].model == "ar1"
 
 
 def _study_folder(tmp_path: Path) -> Path:
@@ -115,10 +110,12 @@ def results(tmp_path_factory: pytest.TempPathFactory) -> Results:
     return run(load_study(folder), until="predict", options=SERIAL)
 
 
-def _metric(res: Results, model: str, window: str, name: str = "rmse") -> float:
+def _metric(
+    res: Results, model: str, window: str, name: str = "rmse", output: str = "heat_flux_in"
+) -> float:
     assert res.predictions is not None
     m = res.predictions.metrics
-    row = m[(m["model"] == model) & (m["window"] == window)]
+    row = m[(m["model"] == model) & (m["window"] == window) & (m["output"] == output)]
     assert len(row) == 1
     return float(row[name].to_numpy(dtype=float)[0])
 
@@ -129,80 +126,43 @@ def _column(table: pd.DataFrame, name: str) -> dict[str, float]:
     return dict(zip(map(str, table.index), values.tolist(), strict=True))
 
 
-def _least_squares_optimum(res: Results) -> np.ndarray:
-    """The simulator fitted directly to the training periods (no emulator, no MCMC).
-
-    Fitted in the metric the calibration's likelihood (eq. 16) sees the data in:
-    the measured periods enter it only through their basis weights ``w*``
-    (standardised per sample, projected on the PCA basis ``K``), with precision
-    ``lambda* K^T K``. So the residual is ``sqrt(k_j^T k_j) (w_j(theta) - w*_j)``
-    over all bases and training periods, where ``w(theta)`` are the weights of the
-    simulator's output at ``theta``. (A plain least-squares fit of the flux series
-    also counts what the basis leaves out and weights the hours of the day equally;
-    on this wall it lands up to 3 posterior SDs away, docs/case-studies.md.)
-    """
-    ctx = res.context
-    assert res.emulator is not None
-    assembled = res.emulator.assembled
-    names = list(ctx.study.parameters)
-    layout = ctx.measured.layout
-    root_ktk = np.sqrt(assembled.basis.ktk)
-
-    def residual(theta: np.ndarray) -> np.ndarray:
-        out = ctx.simulator.simulate(dict(zip(names, theta, strict=True)), ctx.measured.forcing)
-        periods = runs_to_columns(layout.cut(out["heat_flux_in"][None]))
-        w = assembled.basis.weights(assembled.outputs.apply({"heat_flux_in": periods}))
-        return ((w - assembled.w_star) * root_ktk).ravel()
-
-    nominal = np.array([p.nominal for p in ctx.study.parameters.values()])
-    lower = np.array([p.prior.lower for p in ctx.study.parameters.values()])
-    upper = np.array([p.prior.upper for p in ctx.study.parameters.values()])
-    fit = least_squares(residual, nominal, x_scale=(upper - lower) / 4, bounds=(lower, upper))
-    assert fit.success
-    return np.asarray(fit.x)
-
-
 @pytest.mark.slow
 @pytest.mark.shared_data
 def test_calibration_beats_the_catalogue_wall_on_both_windows(results: Results) -> None:
-    # The issue's bar: the nominal wall reaches about 0.45 W/m² on the training days
-    # (0.28 on the held-out week); a calibration worth the name must beat it on
-    # the held-out window. The full-size run gains 28 % there (docs/case-studies.md);
-    # the reduced one here must gain at least 10 %.
+    # The nominal wall reaches about 0.45 W/m² on the training days (0.28 on the
+    # held-out week); the full-size run gains 14 % and 25 % (docs/case-studies.md).
     for window in ("train", "test"):
         nominal = _metric(results, "nominal", window)
-        assert _metric(results, "calibrated", window) < 0.9 * nominal, window
+        assert _metric(results, "calibrated", window) < 0.95 * nominal, window
     assert _metric(results, "nominal", "train") == pytest.approx(0.447, abs=0.01)
 
 
 @pytest.mark.slow
 @pytest.mark.shared_data
-def test_difference_process_fits_the_training_residual(results: Results) -> None:
-    # Delta is fitted to what the calibrated wall leaves on the training days, so
-    # there it must take most of the remaining error away. On the held-out week it
-    # extrapolates and is not required to help (it does not: docs/case-studies.md).
-    calibrated = _metric(results, "calibrated", "train")
-    assert _metric(results, "calibrated+delta", "train") < 0.6 * calibrated
-    assert np.isfinite(_metric(results, "calibrated+delta", "test"))
+def test_the_held_out_temperature_is_never_confidently_wrong(results: Results) -> None:
+    # Column 16 (temp_interface_2, inside the wall) is never calibrated on. The
+    # calibrated wall must predict it better than the catalogue wall, or else cover
+    # it with its band at >= 80 % on both windows (issue 15's acceptance).
+    for window in ("train", "test"):
+        better = _metric(results, "calibrated", window, "rmse", "temp_interface_2") < _metric(
+            results, "nominal", window, "rmse", "temp_interface_2"
+        )
+        covered = _metric(results, "calibrated", window, "coverage95", "temp_interface_2")
+        assert better or covered >= 0.8, (window, covered)
 
 
 @pytest.mark.slow
 @pytest.mark.shared_data
-def test_posterior_is_inside_the_prior_and_matches_a_direct_fit(results: Results) -> None:
+def test_posterior_is_inside_the_prior(results: Results) -> None:
     post = results.posterior
     assert post is not None
     means = _column(post.summary(), "mean")
-    study = results.context.study
-    optimum = _least_squares_optimum(results)
-    for k, (name, p) in enumerate(study.parameters.items()):
+    for name, p in results.context.study.parameters.items():
         mean, width = means[name], p.prior.upper - p.prior.lower
         # Away from the bounds: the data, not the prior, locate every parameter.
         assert p.prior.lower + 0.1 * width < mean < p.prior.upper - 0.1 * width, name
-        # Flat prior and ~1300 training samples: the posterior mean is the
-        # simulator's least-squares optimum in the likelihood's metric, up to
-        # emulator error and Monte Carlo error of the short chains (posterior SDs
-        # are 1-3 % of the prior widths).
-        assert abs(mean - optimum[k]) < 0.05 * width, name
+    # The AR(1) coefficient of the flux's errors: strongly positive (0.77 at full size).
+    assert 0.5 < means["phi"] < 0.95
 
 
 @pytest.mark.slow
@@ -216,9 +176,9 @@ def test_diagnostics_are_computed(results: Results) -> None:
     for name in [*results.context.study.parameters, "lambda", "lambda_star"]:
         assert ess_bulk[name] > 0, name  # a NaN fails too
         assert ess_tail[name] > 0, name
-        # Four NUTS chains of 500 kept draws: R-hat near 1 (the full run: <= 1.003).
-        assert 0.99 < r_hat[name] < 1.05, name
-    assert post.draws.shape[:2] == (4, 500)
+        # Four short chains of 400 kept draws: R-hat near 1 (the full run: <= 1.008).
+        assert 0.99 < r_hat[name] < 1.1, name
+    assert post.draws.shape[:2] == (4, 400)
 
 
 @pytest.mark.slow

@@ -31,3 +31,28 @@ def test_simulation_bar_counts_runs_and_failures(
     assert results.n_failed == 1
     assert "runs: 100%" in err
     assert "failed=1" in err
+
+
+def test_comparison_table_keeps_long_variant_names_apart() -> None:
+    import pandas as pd
+
+    from bayescal.cli.progress import comparison_text
+
+    names = ["box-coheating-white", "box-coheating-white-delta"]
+    table = pd.DataFrame(
+        {
+            "rank": [1, 2],
+            "variant": names,
+            "elpd": [-10.0, -20.0],
+            "se": [1.0, 1.0],
+            "elpd_diff": [0.0, 10.0],
+            "se_diff": [0.0, 2.0],
+            "p_loo": [3.0, 4.0],
+            "k_high": [0, 0],
+            "refits": [0, 0],
+            "periods": [11, 11],
+        }
+    )
+    rows = comparison_text(table, [], {}).splitlines()[2:4]
+    assert rows[0].split()[1] == names[0]
+    assert rows[1].split()[1] == names[1]

@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from bayescal.emulator.assemble import assemble, runs_to_columns
+from bayescal.emulator.assemble import NoiseSpec, assemble, runs_to_columns
+from bayescal.emulator.noise import DEFAULT_NOISE_PRIOR
 from bayescal.errors import DataError
 from virtual_wall import PER_DAY, VirtualExperiment, virtual_experiment
 
@@ -53,14 +54,20 @@ def test_weights_and_lambda_priors_match_least_squares(small: VirtualExperiment)
     )
     assert a.basis.p == 2
     k = a.basis.k
-    for y, w, prior in ((a.y_std, a.w, a.lam_prior), (a.y_star_std, a.w_star, a.lam_star_prior)):
+    # lambda: the paper's Gamma(5, 5) updated by eq. 7; lambda*: the weak default
+    # (a sensor accuracy the study does not state must not dominate the data).
+    cases = (
+        (a.y_std, a.w, a.lam_prior, (5.0, 5.0)),
+        (a.y_star_std, a.w_star, a.lam_star_prior, DEFAULT_NOISE_PRIOR),
+    )
+    for y, w, prior, (shape, rate) in cases:
         ref, *_ = np.linalg.lstsq(k, y, rcond=None)
         # Two independent least-squares solvers on a well-conditioned 2-column K.
         np.testing.assert_allclose(w, ref.T, rtol=1e-9, atol=1e-11)
         resid = y - k @ ref
         n, m = y.shape
-        assert prior[0] == pytest.approx(5.0 + 0.5 * m * (n - 2), rel=1e-15)
-        assert prior[1] == pytest.approx(5.0 + 0.5 * float(np.sum(resid**2)), rel=1e-9)
+        assert prior[0] == pytest.approx(shape + 0.5 * m * (n - 2), rel=1e-15)
+        assert prior[1] == pytest.approx(rate + 0.5 * float(np.sum(resid**2)), rel=1e-9)
 
 
 def test_variance_fraction_picks_the_fewest_components(small: VirtualExperiment) -> None:
@@ -136,3 +143,16 @@ def test_history_adds_the_previous_periods_conditions(small: VirtualExperiment) 
     np.testing.assert_allclose(lag.mean, before.mean(axis=1), rtol=1e-12)
     # The basis and the weights do not depend on x.
     np.testing.assert_array_equal(lagged.w, base.w)
+
+
+def test_noise_specs_reach_the_observation_model(small: VirtualExperiment) -> None:
+    # [outputs.errors] discrepancy = true must switch the in-likelihood discrepancy on.
+    noise = {"heat_flux_in": NoiseSpec("ar1", None, discrepancy=True)}
+    a = assemble(
+        small.design, small.runs, small.measured, small.boundary, small.layout, noise=noise
+    )
+    (out,) = a.observations.outputs
+    assert (out.model, out.discrepancy) == ("ar1", True)
+    assert a.observations.names() == ("lambda_star", "phi", "delta_rel")
+    plain = assemble(small.design, small.runs, small.measured, small.boundary, small.layout)
+    assert not plain.observations.outputs[0].discrepancy

@@ -51,6 +51,46 @@ def paper_wall() -> MultilayerWall:
     return MultilayerWall(layers, parameters=targets, boundary="surface")
 
 
+def plastered_wall() -> MultilayerWall:
+    """The paper's wall with a 15 mm gypsum plaster inside: what the 3-layer model lacks."""
+    layers = [
+        Layer("fb_out", 0.027, 0.0316, 116.6, 840.0),
+        Layer("concrete", 0.150, 0.12, 552.0, 800.0),
+        Layer("fb_in", 0.027, 0.0316, 116.6, 840.0),
+        Layer("plaster", 0.015, 0.4, 1000.0, 1000.0),
+    ]
+    targets = {
+        "k_cb": ["concrete.conductivity"],
+        "cp_cb": ["concrete.specific_heat"],
+        "cp_fb": ["fb_out.specific_heat", "fb_in.specific_heat"],
+    }
+    return MultilayerWall(layers, parameters=targets, boundary="surface")
+
+
+def interval_means(wall: MultilayerWall, truth: dict[str, float], bc: dict[str, np.ndarray],
+                   fine: int = 6) -> np.ndarray:  # fmt: skip
+    """Inside heat flux as a logger records it: the mean over each clock interval.
+
+    The wall is run on a clock ``fine`` times finer (the surface temperatures
+    interpolated linearly, as the simulator itself does between samples) and
+    the flux averaged over ``(t - STEP, t]`` by the trapezoidal rule; sample 0
+    keeps the instantaneous value. The calibrated model returns instantaneous
+    values: a model-form error of the observation, as in most monitoring
+    campaigns, that leaves every parameter its physical meaning. [W/m²]
+    """
+    n = next(iter(bc.values())).size
+    t_fine = np.arange((n - 1) * fine + 1) / fine
+    series = {name: np.interp(t_fine, np.arange(n), v) for name, v in bc.items()}
+    flux = wall.simulate(truth, Forcing(STEP / fine, series))["heat_flux_in"]
+    out = np.empty(n)
+    out[0] = flux[0]
+    windows = flux[: (n - 1) * fine + 1]
+    for i in range(1, n):
+        seg = windows[(i - 1) * fine : i * fine + 1]
+        out[i] = (seg.sum() - 0.5 * (seg[0] + seg[-1])) / fine
+    return out
+
+
 def _ar1(rng: np.random.Generator, n: int, phi: float, sd: float) -> np.ndarray:
     """Stationary AR(1) series with coefficient ``phi`` and marginal sd ``sd``."""
     out = np.empty(n)
@@ -126,6 +166,9 @@ def virtual_experiment(
     warmup_days: int = 4,
     test_days: int = 2,
     noise_variance: float = NOISE_VARIANCE,
+    noise_phi: float = 0.0,
+    true_wall: MultilayerWall | None = None,
+    means: bool = False,
 ) -> VirtualExperiment:
     """Simulate the virtual experiment.
 
@@ -143,6 +186,13 @@ def virtual_experiment(
         Days of warm-up before and of test window after the training periods.
     noise_variance
         Variance of the measurement noise on the inside heat flux. [(W/m²)²]
+    noise_phi
+        Lag-1 autocorrelation of the noise from sample to sample (AR(1), 0: white). [-]
+    true_wall
+        The wall that makes the "measurements" (default: the calibrated model
+        itself; another wall gives a model-form error the calibration cannot remove).
+    means
+        Record interval means instead of instantaneous values (:func:`interval_means`).
     """
     rng = np.random.default_rng(seed)
     truth = dict(PAPER_TRUTH if truth is None else truth)
@@ -152,8 +202,15 @@ def virtual_experiment(
     wall = paper_wall()
     design = latin_hypercube(PRIORS, runs, seed=int(rng.integers(2**31)))
     sims = np.array([wall.simulate(design.row(k), forcing)["heat_flux_in"] for k in range(runs)])
-    clean = wall.simulate(truth, forcing)["heat_flux_in"]
-    noisy = clean + rng.normal(0.0, np.sqrt(noise_variance), n_total)
+    measuring = wall if true_wall is None else true_wall
+    if means:
+        clean = interval_means(measuring, truth, bc)
+    else:
+        clean = measuring.simulate(truth, forcing)["heat_flux_in"]
+    if noise_phi:
+        noisy = clean + _ar1(rng, n_total, noise_phi, np.sqrt(noise_variance))
+    else:
+        noisy = clean + rng.normal(0.0, np.sqrt(noise_variance), n_total)
     layout = layout_periods(n_total, PER_DAY, PER_DAY * warmup_days, PER_DAY * test_days)
     return VirtualExperiment(
         design=design,

@@ -123,12 +123,42 @@ def test_interrupted_lockstep_chains_resume_identically(tmp_path: Path, limit: i
     assert resumed_target.calls == 2 * (800 - kept) + 1
 
 
+def _run_groups(target: Target, folder: Path | None) -> np.ndarray:
+    chains = run_chains(
+        SAMPLER,
+        target,
+        [[1.0, 0.0], [2.0, 0.5], [0.5, -0.5], [1.5, 1.0]],
+        500,
+        seed=11,
+        backend="vectorised-processes",
+        max_workers=2,
+        checkpoint_dir=folder,
+        checkpoint_seconds=0.0,
+    )
+    return chains.draws
+
+
+@pytest.mark.parametrize("limit", [60, 1500])
+def test_interrupted_lockstep_groups_in_processes_resume_identically(
+    tmp_path: Path, limit: int
+) -> None:
+    # Two lockstep groups of two chains, one per worker process; each worker's copy
+    # of the target dies after `limit` batched calls.
+    reference = _run_lockstep(BatchTarget(), None)
+    np.testing.assert_array_equal(_run_groups(BatchTarget(), None), reference)
+    with pytest.raises(Interrupt):
+        _run_groups(BatchTarget(limit), tmp_path)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["lockstep-0.npz", "lockstep-1.npz"]
+    resumed = _run_groups(BatchTarget(), tmp_path)
+    np.testing.assert_array_equal(resumed, reference)
+
+
 SCRIPT = """
 import sys
 from bayescal.config import load_study
 from bayescal.pipeline import Options, run
 run(load_study(sys.argv[1]), until="calibrate",
-    options=Options(backend="serial", chains_backend="serial", checkpoint_seconds=0.0))
+    options=Options(backend="serial", chains_backend=sys.argv[2], checkpoint_seconds=0.0))
 """
 
 FAST = """
@@ -144,44 +174,56 @@ samples = 1500
 """
 
 
-def _study(folder: Path) -> Path:
+def _study(folder: Path, samples: int = 1500) -> Path:
     result = CliRunner().invoke(main, ["init", "wall", str(folder)])
     assert result.exit_code == 0, result.output
     text = (folder / "study.toml").read_text(encoding="utf-8")
-    (folder / "study.toml").write_text(text[: text.index("[emulator]")] + FAST, "utf-8")
+    fast = FAST.replace("samples = 1500", f"samples = {samples}")
+    (folder / "study.toml").write_text(text[: text.index("[emulator]")] + fast, "utf-8")
     return folder
 
 
-def _python(study: Path) -> subprocess.Popen[bytes]:
+def _python(study: Path, chains: str) -> subprocess.Popen[bytes]:
     env = dict(os.environ, OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1")
-    return subprocess.Popen([sys.executable, "-c", SCRIPT, str(study)], env=env)
+    return subprocess.Popen(
+        [sys.executable, "-c", SCRIPT, str(study), chains], env=env, start_new_session=True
+    )
 
 
 @pytest.mark.slow
-def test_sigkill_in_the_calibration_stage_resumes_identically(tmp_path: Path) -> None:
-    reference = _study(tmp_path / "reference")
-    assert _python(reference).wait(timeout=600) == 0
+@pytest.mark.parametrize(
+    ("chains", "snapshot", "samples"),
+    # "auto" runs the calibration as lockstep groups in worker processes, about
+    # three times faster: more sweeps leave time to kill it midway.
+    [("serial", "chain-*.npz", 1500), ("auto", "lockstep*.npz", 8000)],
+)
+def test_sigkill_in_the_calibration_stage_resumes_identically(
+    tmp_path: Path, chains: str, snapshot: str, samples: int
+) -> None:
+    reference = _study(tmp_path / "reference", samples)
+    assert _python(reference, chains).wait(timeout=600) == 0
     expected = load_posterior(reference / "out" / "posterior.nc").draws
 
-    study = _study(tmp_path / "killed")
+    study = _study(tmp_path / "killed", samples)
     rng = np.random.default_rng(5)
-    proc = _python(study)
+    proc = _python(study, chains)
     deadline = time.monotonic() + 300
     snapshots = study / "out" / "checkpoints"
-    # Wait for the calibration's first snapshot, then kill at a random later moment.
-    while not list(snapshots.glob("calibrate-*/chain-*.npz")):
+    # Wait for the calibration's first snapshot, then kill at a random later moment:
+    # the whole process group, worker processes included (as a killed job is).
+    while not list(snapshots.glob(f"calibrate-*/{snapshot}")):
         assert proc.poll() is None, "the run ended before the calibration checkpointed"
         assert time.monotonic() < deadline
         time.sleep(0.05)
     time.sleep(float(rng.uniform(0.2, 1.5)))
     assert proc.poll() is None, "the calibration finished before it could be killed"
-    proc.send_signal(signal.SIGKILL)
+    os.killpg(proc.pid, signal.SIGKILL)
     assert proc.wait() == -signal.SIGKILL
     assert not (study / "out" / "posterior.nc").exists()
     folder = study / "out" / "simulations" / "runs"
     runs_before = sorted(p.name for p in folder.iterdir())
     stats_before = {n: (folder / n).stat().st_mtime_ns for n in runs_before}
-    assert _python(study).wait(timeout=600) == 0
+    assert _python(study, chains).wait(timeout=600) == 0
     draws = load_posterior(study / "out" / "posterior.nc").draws
     np.testing.assert_array_equal(draws, expected)
     # No finished simulator run was repeated, and the snapshots are gone.

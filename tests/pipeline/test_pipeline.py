@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import datetime as dt
 import json
 import re
@@ -143,6 +144,7 @@ def test_cli_show_and_errors(first: tuple[Path, Results], tmp_path: Path) -> Non
     assert shown.exit_code == 0, shown.output
     assert re.search(r"k_cb\s+0\.12", shown.output)
     assert "max_abs_error is the paper's 'MAE'" in shown.output
+    assert "The test window is read only for these final metrics" in shown.output
     empty = _study(tmp_path)
     result = runner.invoke(main, ["show", str(empty)])
     assert result.exit_code == 2
@@ -240,3 +242,34 @@ def test_a_study_stopped_after_the_emulator_loads_and_shows(
     assert report.output.count("\n") == 1
     assert "the report needs the emulator, calibrate and predict stages" in report.output
     assert "not run yet: calibrate, predict" in report.output
+
+
+def test_strict_exits_non_zero_on_failed_diagnostics(
+    first: tuple[Path, Results], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    folder, res = first
+    runner = CliRunner()
+    # The fixture's own chains: the exit status follows its diagnostics.
+    ok = runner.invoke(main, ["run", str(folder), "--until", "predict", "--strict", "-q"])
+    assert ok.exit_code == (3 if res.diagnostic_warnings() else 0), ok.output
+    # A failed diagnostic: status 3, one line naming it, the results kept.
+    failed = ("calibration: k_cb: R-hat 1.05 > 1.01", "calibration: k_cb: bulk ESS 80 < 400")
+    monkeypatch.setattr(Results, "diagnostic_warnings", lambda self: failed)
+    bad = runner.invoke(main, ["run", str(folder), "--until", "predict", "--strict", "-q"])
+    assert bad.exit_code == 3
+    assert bad.output.count("\n") == 1
+    assert "R-hat 1.05" in bad.output
+    assert "and 1 more" in bad.output
+    assert "Traceback" not in bad.output
+    assert (folder / "out" / "posterior.nc").is_file()
+    lenient = runner.invoke(main, ["run", str(folder), "--until", "predict", "-q"])
+    assert lenient.exit_code == 0
+
+
+def test_diagnostic_warnings_name_their_phase(first: tuple[Path, Results]) -> None:
+    _, res = first
+    assert res.posterior is not None
+    diag = dataclasses.replace(res.posterior.diagnostics, warnings=("k_cb: R-hat 1.2 > 1.01",))
+    post = dataclasses.replace(res.posterior, diagnostics=diag)
+    found = dataclasses.replace(res, posterior=post).diagnostic_warnings()
+    assert found[0] == "calibration: k_cb: R-hat 1.2 > 1.01"

@@ -158,9 +158,10 @@ def test_report_has_every_section_and_embeds_every_figure(full_report: Path) -> 
     text = full_report.read_text(encoding="utf-8")
     for title in SECTIONS:
         assert f"<h2>{title}</h2>" in text, title
+    assert "The test window is read only for these final metrics" in text
     # Posterior (3) + emulator (3) figures, and per output: fit, fit with Delta, Delta vs BC.
     images = _images(text)
-    assert len(images) == 6 + 3
+    assert len(images) == 8 + 3
     pngs = sorted((full_report.parent / "figures").glob("*.png"))
     assert len(pngs) == len(images)
     assert sorted(images) == sorted(p.read_bytes() for p in pngs)
@@ -225,8 +226,8 @@ def test_report_without_discrepancy_or_failures_and_with_two_outputs(
     text = write_report(inputs, tmp_path).read_text(encoding="utf-8")
     for title in SECTIONS:
         assert f"<h2>{title}</h2>" in text, title
-    assert len(_images(text)) == 6 + 2
-    assert len(list((tmp_path / "figures").glob("*.png"))) == 6 + 2
+    assert len(_images(text)) == 8 + 2
+    assert len(list((tmp_path / "figures").glob("*.png"))) == 8 + 2
     assert "temp_interface [°C], training window" in text
     assert "MSE [(W/m²)²]" in text
     assert "MSE [°C²]" in text
@@ -310,7 +311,7 @@ def test_posterior_table_shows_the_parameters_units(parts: Parts) -> None:
     assert "<th>parameter</th><th>unit</th><th>mean</th>" in text
     assert "<td>k_cb</td><td>W/(m·K)</td>" in text
     assert "<td>cp_cb</td><td>–</td>" in text  # no unit given
-    assert "<td>lambda</td><td>–</td>" in text
+    assert "<td>lambda</td><td>1</td>" in text  # a precision in standardised units
 
 
 def test_metric_tables_take_their_columns_from_the_one_list(parts: Parts) -> None:

@@ -480,3 +480,23 @@ def test_pickled_wall_gives_identical_output():
     for name in first:
         assert first[name].shape == (200,)
         np.testing.assert_array_equal(first[name], again[name])
+
+
+def test_derived_quantities_of_the_paper_wall() -> None:
+    # R = sum d/k, U with the surface resistances, kappa = sum rho c d (EN ISO 6946/13786).
+    layers = [
+        Layer("fb_out", 0.027, 0.0316, 116.6, 840.0),
+        Layer("concrete", 0.150, 0.12, 552.0, 800.0),
+        Layer("fb_in", 0.027, 0.0316, 116.6, 840.0),
+    ]
+    wall = MultilayerWall(layers, parameters={"k": "concrete.conductivity"}, r_si=0.13, r_se=0.04)
+    got = wall.derived({"k": 0.15})
+    r = 2 * 0.027 / 0.0316 + 0.150 / 0.15
+    assert got["R_wall"] == pytest.approx(r, rel=1e-12)
+    assert got["U_value"] == pytest.approx(1.0 / (r + 0.17), rel=1e-12)
+    kappa = 2 * 116.6 * 840.0 * 0.027 + 552.0 * 800.0 * 0.150
+    assert got["areal_heat_capacity"] == pytest.approx(kappa, rel=1e-12)
+    assert set(wall.derived_units) == set(got)
+    # The paper's wall at its nominal values: U of method.md section 8 (0.31961 W/(m²K)).
+    nominal = MultilayerWall(layers, r_si=0.13, r_se=0.04).derived({})
+    assert nominal["U_value"] == pytest.approx(0.31961, abs=5e-6)

@@ -10,7 +10,10 @@
   and sampling without diagnostics;
 * :mod:`~bayescal.calibration.hmc` -- the same in JAX for NUTS;
 * :mod:`~bayescal.calibration.posterior` -- :func:`calibrate` and the
-  :class:`Posterior` with its diagnostics.
+  :class:`Posterior` with its diagnostics;
+* :mod:`~bayescal.calibration.loo`, :mod:`~bayescal.calibration.cv` and
+  :mod:`~bayescal.calibration.heldout` -- leave-one-period-out log predictive
+  densities (``bayescal compare``).
 
 The MCMC engine itself (samplers, chains, checkpoints, diagnostics) is
 :mod:`bayescal.mcmc`.

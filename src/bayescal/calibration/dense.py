@@ -13,7 +13,13 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from bayescal.calibration.batch import BatchErrors, check_batch_args, logpdf_loop
-from bayescal.emulator.dense import GridData, broadcast_obs_nuggets, dense_logpdf
+from bayescal.emulator.dense import (
+    GridData,
+    broadcast_obs_nuggets,
+    calibration_covariance,
+    dense_logpdf,
+    gaussian_logdensity,
+)
 from bayescal.emulator.kernel import FloatArray, LogDensity, SeparableKernel
 
 __all__ = ["DenseCalibrationDensity"]
@@ -53,7 +59,13 @@ class DenseCalibrationDensity:
         d = self._data
         return type(self)(d.theta, d.x, d.kernels, d.ktk, d.w, w_star, d.obs_index)
 
-    def pieces_nuggets(self, theta_star: ArrayLike, a: ArrayLike, a_star: ArrayLike) -> LogDensity:
+    def pieces_nuggets(
+        self,
+        theta_star: ArrayLike,
+        a: ArrayLike,
+        a_star: ArrayLike,
+        delta: ArrayLike | None = None,
+    ) -> LogDensity:
         """Log-density summed over bases for explicit nuggets.
 
         Parameters
@@ -64,6 +76,8 @@ class DenseCalibrationDensity:
             Simulator nuggets, shape ``(p,)``. [-]
         a_star
             Observation nuggets, shape ``(p,)`` or ``(p, m_obs)``. [-]
+        delta
+            Model-discrepancy variance per basis ``(p,)`` or ``None``. [-]
         """
         d = self._data
         if d.w_star is None:
@@ -71,6 +85,11 @@ class DenseCalibrationDensity:
         ts = np.asarray(theta_star, dtype=float).reshape(-1)
         a_arr = np.broadcast_to(np.asarray(a, dtype=float), (d.n_bases,))
         as_arr = broadcast_obs_nuggets(a_star, d.n_bases, d.obs_index.size)
+        dl = (
+            np.zeros(d.n_bases)
+            if delta is None
+            else np.broadcast_to(np.asarray(delta, float), (d.n_bases,))
+        )
         total = LogDensity.zero()
         for j, kern in enumerate(d.kernels):
             v = np.concatenate([d.w[:, j], d.w_star[:, j]])
@@ -83,6 +102,7 @@ class DenseCalibrationDensity:
                 theta_star=ts,
                 obs_index=d.obs_index,
                 a_star=as_arr[j],
+                delta=float(dl[j]),
             )
         return total
 
@@ -90,6 +110,61 @@ class DenseCalibrationDensity:
         """Log-density and its pieces for precisions ``lambda`` and ``lambda*``."""
         a, a_star = self._data.nuggets(lam, lam_star)
         return self.pieces_nuggets(theta_star, a, a_star)
+
+    def pieces_grouped(
+        self,
+        theta_star: ArrayLike,
+        a: ArrayLike,
+        a_star: ArrayLike,
+        groups: Sequence[tuple[Sequence[int], FloatArray]],
+        delta: ArrayLike | None = None,
+    ) -> LogDensity:
+        """Log-density with coupled observation noise within groups of bases (dense).
+
+        One covariance over all bases' ``[w_j; w*_j]``: each basis's eq. 14
+        block, and within every period the noise ``groups`` puts between the
+        observed weights of a group's bases (``a*_j`` on the diagonal for the
+        others). Arguments as
+        :meth:`bayescal.calibration.kron.KronCalibrationDensity.pieces_grouped`.
+        """
+        d = self._data
+        if d.w_star is None:
+            raise ValueError("no observed weights: build with w_star for calibration")
+        ts = np.asarray(theta_star, dtype=float).reshape(-1)
+        a_arr = np.broadcast_to(np.asarray(a, dtype=float), (d.n_bases,))
+        as_arr = np.broadcast_to(np.asarray(a_star, dtype=float), (d.n_bases,))
+        n_sim, m_obs = d.w.shape[0], d.obs_index.size
+        block = n_sim + m_obs
+        cov = np.zeros((d.n_bases * block, d.n_bases * block))
+        vec = np.empty(d.n_bases * block)
+        grouped = {j for members, _ in groups for j in members}
+        dl = (
+            np.zeros(d.n_bases)
+            if delta is None
+            else np.broadcast_to(np.asarray(delta, float), (d.n_bases,))
+        )
+        for j, kern in enumerate(d.kernels):
+            rows = slice(j * block, (j + 1) * block)
+            nugget = 0.0 if j in grouped else float(as_arr[j])
+            cov[rows, rows] = calibration_covariance(
+                d.theta,
+                d.x,
+                kern,
+                float(a_arr[j]),
+                theta_star=ts,
+                obs_index=d.obs_index,
+                a_star=nugget,
+                delta=float(dl[j]),
+            )
+            vec[rows] = np.concatenate([d.w[:, j], d.w_star[:, j]])
+        period = np.arange(m_obs)
+        for members, noise in groups:
+            for aj, j in enumerate(members):
+                for ak, k in enumerate(members):
+                    rj = j * block + n_sim + period
+                    rk = k * block + n_sim + period
+                    cov[rj, rk] += noise[aj, ak]
+        return gaussian_logdensity(cov, vec)
 
     def stacked_grid(self) -> None:
         """No stacked grid: the dense reference factorises the whole covariance."""

@@ -25,11 +25,12 @@ for bit.
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 from functools import cached_property
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from bayescal.emulator.dense import GridData
 from bayescal.emulator.kernel import FloatArray, SeparableKernel
@@ -78,6 +79,14 @@ class BasisPieces:
     obs: FloatArray
     p_obs: FloatArray
     sx_obs: FloatArray
+
+    def with_observations(self, d: GridData, j: int) -> BasisPieces:
+        """The same basis with the observed weights of ``d`` (eigen-decompositions kept)."""
+        obs = np.zeros(0) if d.w_star is None else d.w_star[:, j]
+        obs_full = np.zeros(d.x.shape[0])
+        if obs.size == d.x.shape[0]:
+            obs_full[d.obs_index] = obs
+        return dataclasses.replace(self, obs=obs, obs_rot=self.eig_x.vectors.T @ obs_full)
 
     @classmethod
     def build(cls, d: GridData, j: int) -> BasisPieces:
@@ -168,6 +177,15 @@ class StackedGrid:
             w_rot=np.stack([b.w_rot for b in bases]),
             obs_rot=np.stack([b.obs_rot for b in bases]),
             ktk=data.ktk,
+        )
+
+    def with_observations(self, w_star: ArrayLike) -> StackedGrid:
+        """The same grid with other observed weights ``(m_obs, p)``: no new eigen-decomposition."""
+        d = self.data
+        data = GridData.build(d.theta, d.x, d.kernels, d.ktk, d.w, w_star, d.obs_index)
+        bases = tuple(b.with_observations(data, j) for j, b in enumerate(self.bases))
+        return dataclasses.replace(
+            self, data=data, bases=bases, obs_rot=np.stack([b.obs_rot for b in bases])
         )
 
     @property

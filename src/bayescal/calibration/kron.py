@@ -45,6 +45,7 @@ memos of what a Gibbs sweep leaves unchanged), :mod:`bayescal.calibration.batch`
 
 from __future__ import annotations
 
+import copy
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any, Literal, Protocol
@@ -93,16 +94,25 @@ def _sim_block(cache: BasisPieces, a: float) -> _SimBlock:
 
 
 def _schur_basis(
-    cache: BasisPieces, sim: _SimBlock, c: FloatArray, a_star: FloatArray, full_grid: bool
+    cache: BasisPieces,
+    sim: _SimBlock,
+    c: FloatArray,
+    a_star: FloatArray,
+    full_grid: bool,
+    delta: float = 0.0,
 ) -> LogDensity:
-    """One basis by the Schur complement of the Kronecker simulator block."""
+    """One basis by the Schur complement of the Kronecker simulator block.
+
+    ``delta`` adds ``delta S_x[O, O]`` to the observed block: a discrepancy
+    ``GP(0, delta c_x)`` over the periods' conditions.
+    """
     lx = cache.eig_x.values
     logdet, quad = sim.logdet, sim.quad
     c_hat = cache.eig_theta.vectors.T @ c
     u = lx * (c_hat @ sim.h)
     g = lx * lx * ((c_hat * c_hat) @ sim.inv_den)
     size = sim.h.size + a_star.size
-    variance = cache.kernel.variance
+    variance = cache.kernel.variance + delta
     if full_grid and a_star.min() == a_star.max():
         schur = variance * lx + a_star[0] - g
         resid = cache.obs_rot - u
@@ -114,6 +124,51 @@ def _schur_basis(
     resid = cache.obs - p_obs @ u
     try:
         chol = linalg.cholesky(schur_mat, lower=True, check_finite=False)
+    except np.linalg.LinAlgError as exc:
+        raise np.linalg.LinAlgError(
+            "observed-block Schur complement is not positive definite"
+        ) from exc
+    half = linalg.solve_triangular(chol, resid, lower=True, check_finite=False)
+    logdet += 2.0 * float(np.sum(np.log(np.diag(chol))))
+    return LogDensity.from_pieces(logdet, quad + float(half @ half), size)
+
+
+def _grouped_bases(
+    caches: Sequence[BasisPieces],
+    sims: Sequence[_SimBlock],
+    cs: Sequence[FloatArray],
+    noise: FloatArray,
+    deltas: Sequence[float],
+) -> LogDensity:
+    """Bases whose observed weights share a noise block, by one joint Schur complement.
+
+    The observed block of the ``q`` bases (rows basis-major: basis ``j``,
+    period ``i``) is ``blockdiag_j(tau_j^-1 S_x,j[O, O]) + noise ⊗ I_m_obs``: the
+    GP is independent between bases, the noise of a period's weights is not
+    (AR(1) errors, :mod:`bayescal.emulator.noise`). Each basis's simulator
+    block stays Kronecker; the ``(q m_obs)``-row Schur complement is factorised.
+    """
+    logdet = quad = 0.0
+    m_obs = caches[0].obs.size
+    q = len(caches)
+    schur = np.kron(noise, np.eye(m_obs))
+    resid = np.empty(q * m_obs)
+    size = 0
+    for j, (cache, sim, c, delta) in enumerate(zip(caches, sims, cs, deltas, strict=True)):
+        lx = cache.eig_x.values
+        c_hat = cache.eig_theta.vectors.T @ c
+        u = lx * (c_hat @ sim.h)
+        g = lx * lx * ((c_hat * c_hat) @ sim.inv_den)
+        rows = slice(j * m_obs, (j + 1) * m_obs)
+        p_obs = cache.p_obs
+        variance = cache.kernel.variance + delta
+        schur[rows, rows] += variance * cache.sx_obs - (p_obs * g) @ p_obs.T
+        resid[rows] = cache.obs - p_obs @ u
+        logdet += sim.logdet
+        quad += sim.quad
+        size += sim.h.size + m_obs
+    try:
+        chol = linalg.cholesky(schur, lower=True, check_finite=False)
     except np.linalg.LinAlgError as exc:
         raise np.linalg.LinAlgError(
             "observed-block Schur complement is not positive definite"
@@ -170,9 +225,11 @@ def _finish(
     u: FloatArray,
     g: FloatArray,
     a_star: FloatArray,
+    delta: FloatArray | None = None,
 ) -> LogDensity:
     """Add the observed block's Schur complement (diagonal in the rotated basis)."""
-    schur = grid.variance[:, None] * grid.l_x
+    variance = grid.variance if delta is None else grid.variance + delta
+    schur = variance[:, None] * grid.l_x
     schur += a_star[:, None]
     schur -= g
     resid = grid.obs_rot - u
@@ -269,11 +326,81 @@ class KronCalibrationDensity:
         return self._grid
 
     def with_observations(self, w_star: ArrayLike) -> KronCalibrationDensity:
-        """A new density with other observed weights (e.g. re-estimated by eq. 20)."""
-        d = self._data
-        return type(self)(d.theta, d.x, d.kernels, d.ktk, d.w, w_star, d.obs_index, self._method)
+        """A new density with other observed weights (e.g. re-estimated by eq. 20).
 
-    def pieces_nuggets(self, theta_star: ArrayLike, a: ArrayLike, a_star: ArrayLike) -> LogDensity:
+        The eigen-decompositions are reused (:meth:`StackedGrid.with_observations`):
+        a new ``w*`` costs ``O(p m*^2)``.
+        """
+        new = copy.copy(self)
+        new._grid = self._grid.with_observations(w_star)
+        new._data = new._grid.data
+        new._reset_memos()
+        return new
+
+    def pieces_grouped(
+        self,
+        theta_star: ArrayLike,
+        a: ArrayLike,
+        a_star: ArrayLike,
+        groups: Sequence[tuple[Sequence[int], FloatArray]],
+        delta: ArrayLike | None = None,
+    ) -> LogDensity:
+        """Log-density when some bases' observed weights share a noise block per period.
+
+        Parameters
+        ----------
+        theta_star
+            Calibration parameters ``(t,)``, scaled to [0, 1]. [-]
+        a
+            Simulator nuggets ``(p,)``. [-]
+        a_star
+            Observation nuggets ``(p,)`` of the bases in no group (others ignored). [-]
+        groups
+            ``(bases, noise)``: the bases of one output and the covariance
+            ``(q, q)`` of their observed weights' noise in every period. [-]
+        delta
+            Model-discrepancy variance per basis ``(p,)`` (see :meth:`pieces_nuggets`). [-]
+        """
+        if self._method != "schur":
+            raise ValueError("grouped observation noise needs method 'schur'")
+        d = self._data
+        ts = np.asarray(theta_star, dtype=float).reshape(1, -1)
+        a_arr = np.broadcast_to(np.asarray(a, dtype=float), (d.n_bases,))
+        as_arr = np.broadcast_to(np.asarray(a_star, dtype=float), (d.n_bases,))
+        grouped = {j for bases, _ in groups for j in bases}
+        dl = (
+            np.zeros(d.n_bases)
+            if delta is None
+            else np.broadcast_to(np.asarray(delta, float), (d.n_bases,))
+        )
+        diff = d.theta - ts
+        bases = self._grid.bases
+        cs = [b.kernel.variance * np.exp(-((diff * diff) @ b.beta_theta)) for b in bases]
+        total = LogDensity.zero()
+        for j, cache in enumerate(bases):
+            if j not in grouped:
+                nug = np.full(d.obs_index.size, float(as_arr[j]))
+                sim = self._sim(j, float(a_arr[j]))
+                total = total + _schur_basis(cache, sim, cs[j], nug, self._full_grid, float(dl[j]))
+        for members, noise in groups:
+            idx = list(members)
+            sims = [self._sim(j, float(a_arr[j])) for j in idx]
+            total = total + _grouped_bases(
+                [bases[j] for j in idx],
+                sims,
+                [cs[j] for j in idx],
+                np.asarray(noise, float),
+                [float(dl[j]) for j in idx],
+            )
+        return total
+
+    def pieces_nuggets(
+        self,
+        theta_star: ArrayLike,
+        a: ArrayLike,
+        a_star: ArrayLike,
+        delta: ArrayLike | None = None,
+    ) -> LogDensity:
         """Log-density summed over bases for explicit nuggets.
 
         Parameters
@@ -285,8 +412,13 @@ class KronCalibrationDensity:
         a_star
             Observation nuggets, shape ``(p,)`` or ``(p, m_obs)`` (per-period
             ``B_j`` of the difference process). [-]
+        delta
+            Variance of a model discrepancy per basis ``(p,)``: the observed
+            weights get ``delta_j c_x(x, x')`` more covariance (a GP over the
+            periods' conditions, independent of the simulator); ``None``: none. [-]
         """
         d = self._data
+        dl = None if delta is None else np.broadcast_to(np.asarray(delta, float), (d.n_bases,))
         ts = np.asarray(theta_star, dtype=float).reshape(1, -1)
         a_arr = np.asarray(a, dtype=float)
         if a_arr.shape != (d.n_bases,):
@@ -295,7 +427,7 @@ class KronCalibrationDensity:
         if self._full_grid and self._method == "schur" and uniform is not None:
             if not (a_arr.min() > 0.0 and uniform.min() > 0.0):
                 raise ValueError("nuggets a and a* must be > 0")
-            return self._stacked_pieces(ts, a_arr, uniform)
+            return self._stacked_pieces(ts, a_arr, uniform, dl)
         as_arr = broadcast_obs_nuggets(a_star, d.n_bases, d.obs_index.size)
         if not (np.all(a_arr > 0.0) and np.all(as_arr > 0.0)):
             raise ValueError("nuggets a and a* must be > 0")
@@ -304,13 +436,13 @@ class KronCalibrationDensity:
             diff = d.theta - ts
             c = cache.kernel.variance * np.exp(-((diff * diff) @ cache.beta_theta))
             if self._method == "eigen":
-                if np.any(as_arr[j] != as_arr[j, 0]):
-                    raise ValueError("method 'eigen' needs a uniform a*; use 'schur'")
+                if np.any(as_arr[j] != as_arr[j, 0]) or dl is not None:
+                    raise ValueError("method 'eigen' needs a uniform a* and no delta; use 'schur'")
                 part = _eigen_basis(cache, c, float(a_arr[j]), float(as_arr[j, 0]))
             else:
-                part = _schur_basis(
-                    cache, self._sim(j, float(a_arr[j])), c, as_arr[j], self._full_grid
-                )
+                sim = self._sim(j, float(a_arr[j]))
+                extra = 0.0 if dl is None else float(dl[j])
+                part = _schur_basis(cache, sim, c, as_arr[j], self._full_grid, extra)
             total = total + part
         return total
 
@@ -328,14 +460,16 @@ class KronCalibrationDensity:
                 return first
         return None
 
-    def _stacked_pieces(self, ts: FloatArray, a: FloatArray, a_star: FloatArray) -> LogDensity:
+    def _stacked_pieces(
+        self, ts: FloatArray, a: FloatArray, a_star: FloatArray, delta: FloatArray | None = None
+    ) -> LogDensity:
         """The full-grid path with uniform ``a*``, through the memos."""
         grid = self._grid
         a_key, ts_key = a.tobytes(), ts.tobytes()
         sims = [self._sim(j, float(a_j)) for j, a_j in enumerate(a)]
         c_hat = self._c_hat_memo.get(ts_key, lambda: _c_hat(grid, ts))
         u, g = self._u_g_memo.get(ts_key + a_key, lambda: _u_g(grid, c_hat, sims))
-        return _finish(grid, sims, u, g, a_star)
+        return _finish(grid, sims, u, g, a_star, delta)
 
     def _sim(self, j: int, a: float) -> _SimBlock:
         block: _SimBlock = self._sim_memo[j].get(
@@ -436,10 +570,23 @@ class CalibrationAlgebra(Protocol):
     def data(self) -> GridData: ...
 
     def pieces_nuggets(
-        self, theta_star: ArrayLike, a: ArrayLike, a_star: ArrayLike
+        self,
+        theta_star: ArrayLike,
+        a: ArrayLike,
+        a_star: ArrayLike,
+        delta: ArrayLike | None = None,
     ) -> LogDensity: ...
 
     def pieces(self, theta_star: ArrayLike, lam: float, lam_star: ArrayLike) -> LogDensity: ...
+
+    def pieces_grouped(
+        self,
+        theta_star: ArrayLike,
+        a: ArrayLike,
+        a_star: ArrayLike,
+        groups: Sequence[tuple[Sequence[int], FloatArray]],
+        delta: ArrayLike | None = None,
+    ) -> LogDensity: ...
 
     def logpdf(self, theta_star: ArrayLike, lam: float, lam_star: ArrayLike) -> float: ...
 

@@ -28,7 +28,7 @@ from __future__ import annotations
 import dataclasses
 import os
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Literal
 
 import numpy as np
@@ -47,6 +47,7 @@ from bayescal.design import Prior
 from bayescal.emulator.assemble import Assembled
 from bayescal.emulator.gp import Emulator
 from bayescal.emulator.kernel import FloatArray
+from bayescal.emulator.noise import ObservationModel, OutputNoise
 from bayescal.errors import ConfigError
 from bayescal.mcmc.chains import BACKENDS, ChainBackend
 from bayescal.mcmc.diagnostics import Diagnostics, diagnose, import_arviz
@@ -56,14 +57,33 @@ if TYPE_CHECKING:
     import pandas as pd
     from arviz import InferenceData
 
-__all__ = ["LAMBDA_NAMES", "CalibrationPosterior", "Posterior", "calibrate"]
+__all__ = ["LAMBDA_NAMES", "CalibrationPosterior", "Derived", "Posterior", "calibrate"]
 
 SamplerKind = Literal["mwg", "nuts"]
 
 
 @dataclass(frozen=True)
+class Derived:
+    """Draws of a quantity computed from theta* (the wall's U-value, a user's expression).
+
+    Attributes
+    ----------
+    draws
+        ``(chains, draws)``, in ``unit``.
+    unit
+        Its unit.
+    description
+        What it is.
+    """
+
+    draws: FloatArray
+    unit: str = ""
+    description: str = ""
+
+
+@dataclass(frozen=True)
 class Posterior:
-    """Draws of theta* (physical units), lambda and lambda*, with diagnostics.
+    """Draws of theta* (physical units), the precisions and error parameters, with diagnostics.
 
     Attributes
     ----------
@@ -73,30 +93,41 @@ class Posterior:
         Parameter name -> prior used in the calibration.
     unit_draws
         theta* on the normalised scale, ``(chains, draws, t)``. [-]
-    lam, lam_star
-        Precision draws ``(chains, draws)``. [-]
+    aux_names
+        Names of the other sampled coordinates: ``lambda``, then one
+        ``lambda_star`` per output, then one ``phi`` per output with AR(1)
+        errors (``("lambda", "lambda_star")`` for the paper's one white output).
+    aux
+        Their draws ``(chains, draws, k)``. [-]
     log_density
         Log posterior (up to a constant) at the draws ``(chains, draws)``.
     acceptance
-        Acceptance rate per chain and coordinate ``(chains, t + 2)``.
+        Acceptance rate per chain and coordinate ``(chains, t + k)``.
     seed
         Root seed of the chains.
     algebra
         ``"kronecker"`` or ``"dense"``.
     diagnostics
-        R-hat, ESS, MCSE and the list of warnings (over theta*, lambda, lambda*).
+        R-hat, ESS, MCSE and the list of warnings (over theta* and ``aux``).
+    noise
+        The outputs' error models (:class:`~bayescal.emulator.noise.OutputNoise`),
+        for the noise in physical units; empty where unknown.
+    derived
+        Quantities computed from theta* at every draw (:meth:`with_derived`).
     """
 
     names: tuple[str, ...]
     priors: Mapping[str, Prior]
     unit_draws: FloatArray
-    lam: FloatArray
-    lam_star: FloatArray
+    aux_names: tuple[str, ...]
+    aux: FloatArray
     log_density: FloatArray
     acceptance: FloatArray
     seed: int
     algebra: str
     diagnostics: Diagnostics
+    noise: tuple[OutputNoise, ...] = ()
+    derived: Mapping[str, Derived] = field(default_factory=dict)
 
     @classmethod
     def build(
@@ -104,39 +135,81 @@ class Posterior:
         names: Sequence[str],
         priors: Mapping[str, Prior],
         unit_draws: ArrayLike,
-        lam: ArrayLike,
-        lam_star: ArrayLike,
-        log_density: ArrayLike,
-        acceptance: ArrayLike,
-        seed: int,
-        algebra: str,
+        lam: ArrayLike | None = None,
+        lam_star: ArrayLike | None = None,
+        log_density: ArrayLike = (),
+        acceptance: ArrayLike = (),
+        seed: int = 0,
+        algebra: str = "kronecker",
         sampler_warnings: Sequence[str] = (),
+        *,
+        aux: ArrayLike | None = None,
+        aux_names: Sequence[str] = LAMBDA_NAMES,
+        noise: Sequence[OutputNoise] = (),
     ) -> Posterior:
         """Assemble the posterior and compute its diagnostics (physical units).
 
-        ``sampler_warnings`` (e.g. NUTS divergences) are appended to the
-        diagnostics' warnings.
+        Give either ``lam`` and ``lam_star`` (one white output) or ``aux`` with
+        its ``aux_names``. ``sampler_warnings`` (e.g. NUTS divergences) are
+        appended to the diagnostics' warnings.
         """
         unit = np.asarray(unit_draws, dtype=float)
-        lam_arr, lam_s = np.asarray(lam, dtype=float), np.asarray(lam_star, dtype=float)
+        if aux is None:
+            if lam is None or lam_star is None:
+                raise ValueError("give lam and lam_star, or aux")
+            aux_arr = np.stack(
+                [np.asarray(lam, dtype=float), np.asarray(lam_star, dtype=float)], axis=-1
+            )
+            aux_names = LAMBDA_NAMES
+        else:
+            aux_arr = np.asarray(aux, dtype=float)
+        if aux_arr.shape[:2] != unit.shape[:2] or aux_arr.shape[-1] != len(aux_names):
+            raise ValueError(
+                f"aux draws {aux_arr.shape} do not match theta* draws {unit.shape} and "
+                f"names {list(aux_names)}"
+            )
         phys = np.stack([p.from_unit(unit[..., k]) for k, p in enumerate(priors.values())], axis=-1)
-        everything = np.concatenate([phys, lam_arr[..., None], lam_s[..., None]], axis=-1)
+        everything = np.concatenate([phys, aux_arr], axis=-1)
         acc = np.asarray(acceptance, dtype=float)
-        diag = diagnose(everything, (*names, *LAMBDA_NAMES), acc)
+        diag = diagnose(everything, (*names, *aux_names), acc)
         if sampler_warnings:
             diag = dataclasses.replace(diag, warnings=(*diag.warnings, *sampler_warnings))
         return cls(
             tuple(names),
             dict(priors),
             unit,
-            lam_arr,
-            lam_s,
+            tuple(aux_names),
+            aux_arr,
             np.asarray(log_density, dtype=float),
             acc,
             int(seed),
             str(algebra),
             diag,
+            tuple(noise),
         )
+
+    @property
+    def lam(self) -> FloatArray:
+        """Draws of the simulator precision ``lambda`` ``(chains, draws)``. [-]"""
+        return self.aux[..., 0]
+
+    @property
+    def lam_star(self) -> FloatArray:
+        """Draws of the (first output's) observation precision ``lambda*`` ``(chains, draws)``."""
+        return self.aux[..., 1]
+
+    @property
+    def lam_stars(self) -> FloatArray:
+        """Every output's ``lambda*``, ``(chains, draws, O)``."""
+        n_out = max(1, len(self.noise))
+        return self.aux[..., 1 : 1 + n_out]
+
+    @property
+    def phi(self) -> FloatArray:
+        """AR(1) coefficients of the outputs with AR(1) errors ``(chains, draws, A)``."""
+        n_out = max(1, len(self.noise))
+        n_phi = sum(o.model == "ar1" for o in self.noise)
+        return self.aux[..., 1 + n_out : 1 + n_out + n_phi]
 
     @property
     def draws(self) -> FloatArray:
@@ -151,12 +224,27 @@ class Posterior:
 
     @property
     def all_names(self) -> tuple[str, ...]:
-        """``names`` then ``lambda`` and ``lambda_star``."""
-        return (*self.names, *LAMBDA_NAMES)
+        """``names`` then ``aux_names``."""
+        return (*self.names, *self.aux_names)
 
     def all_draws(self) -> FloatArray:
-        """``[theta* (physical), lambda, lambda*]``, ``(chains, draws, t + 2)``."""
-        return np.concatenate([self.draws, self.lam[..., None], self.lam_star[..., None]], axis=-1)
+        """``[theta* (physical), aux]``, ``(chains, draws, t + k)``."""
+        return np.concatenate([self.draws, self.aux], axis=-1)
+
+    def noise_sd(self) -> dict[str, FloatArray]:
+        """Output name -> draws of its noise standard deviation in the output's unit.
+
+        ``s_o / sqrt(lambda*_o)`` with the output's scale ``s_o``; empty where the
+        error models are not known (posteriors from before they were recorded).
+        """
+        return {o.name: o.scale / np.sqrt(self.lam_stars[..., q]) for q, o in enumerate(self.noise)}
+
+    def with_derived(self, derived: Mapping[str, Derived]) -> Posterior:
+        """The same posterior with derived quantities attached (names must be new)."""
+        clash = sorted(set(derived) & {*self.all_names, *self.derived})
+        if clash:
+            raise ConfigError(f"derived quantities {clash} clash with names already in use")
+        return dataclasses.replace(self, derived={**self.derived, **derived})
 
     def interval(self, level: float = 0.95) -> tuple[FloatArray, FloatArray]:
         """Central credible interval of theta* per parameter (physical units), ``(t,)`` each."""
@@ -165,18 +253,35 @@ class Posterior:
         return np.percentile(flat, tail, axis=0), np.percentile(flat, 100.0 - tail, axis=0)
 
     def summary(self, level: float = 0.95) -> pd.DataFrame:
-        """Mean, SD, credible interval, R-hat and ESS per parameter (physical units)."""
+        """Mean, SD, credible interval, R-hat and ESS per quantity (physical units).
+
+        Rows: the parameters, the sampled precisions and AR(1) coefficients,
+        and the noise standard deviation of each output in its unit
+        (``noise_sd`` or ``noise_sd_<output>``).
+        """
         import pandas as pd
 
         flat = self.all_draws().reshape(-1, len(self.all_names))
         tail = 50.0 * (1.0 - level)
-        table = self.diagnostics.table()
+        table = pd.DataFrame(self.diagnostics.table())
         table["lower"] = np.percentile(flat, tail, axis=0)
         table["upper"] = np.percentile(flat, 100.0 - tail, axis=0)
-        return pd.DataFrame(table)
+        extras = {
+            ("noise_sd" if len(self.noise) == 1 else f"noise_sd_{n}"): sd
+            for n, sd in self.noise_sd().items()
+        }
+        extras |= {name: d.draws for name, d in self.derived.items()}
+        if extras:
+            stacked = np.stack(list(extras.values()), axis=-1)
+            extra = pd.DataFrame(diagnose(stacked, list(extras)).table())
+            flat_extra = stacked.reshape(-1, len(extras))
+            extra["lower"] = np.percentile(flat_extra, tail, axis=0)
+            extra["upper"] = np.percentile(flat_extra, 100.0 - tail, axis=0)
+            table = pd.concat([table, extra])
+        return table
 
     def inference_data(self) -> InferenceData:
-        """ArviZ ``InferenceData``: posterior (physical theta*, lambda, lambda*), lp, seed."""
+        """ArviZ ``InferenceData``: posterior (physical theta*, aux), lp, seed."""
         az = import_arviz()
         draws = self.all_draws()
         posterior = {n: draws[..., k] for k, n in enumerate(self.all_names)}
@@ -215,12 +320,13 @@ def calibrate(
     n_burn: int = 1000,
     n_draws: int = 1000,
     seed: int = 0,
-    backend: ChainBackend = "processes",
+    backend: ChainBackend = "auto",
     algebra: Kind = "kronecker",
     sampler: SamplerKind = "mwg",
     callback: Callable[[int], None] | None = None,
     checkpoint_dir: str | os.PathLike[str] | None = None,
     checkpoint_seconds: float = 30.0,
+    observations: ObservationModel | None = None,
 ) -> Posterior:
     """Sample theta*, lambda and lambda* (eq. 16) with the hyperparameters at the MAP.
 
@@ -239,11 +345,13 @@ def calibrate(
     seed
         Root seed; chain ``k`` uses ``SeedSequence(seed).spawn(n_chains)[k]``.
     backend
-        ``"processes"`` (chains in worker processes), ``"serial"``, or
-        ``"vectorised"`` (all chains in lockstep in this process, one batched
-        likelihood call per coordinate update; ``sampler="mwg"`` only, no
-        checkpoints; draws equal the serial ones; 1.4-6x faster than serial
-        4-16 chains, see ``docs/benchmarks.md``).
+        ``"auto"`` (default: lockstep groups over the worker processes where the
+        batched likelihood exists, else worker processes; see
+        :func:`bayescal.mcmc.chains.choose_backend`), ``"processes"`` (chains in
+        worker processes), ``"serial"``, ``"vectorised"`` (all chains in
+        lockstep in this process, one batched likelihood call per coordinate
+        update; ``sampler="mwg"`` only; draws equal the serial ones; see
+        ``docs/benchmarks.md``) or ``"vectorised-processes"``.
     algebra
         ``"kronecker"`` (fast, default) or ``"dense"`` (reference).
     sampler
@@ -264,6 +372,10 @@ def calibrate(
         Not supported by ``"nuts"`` (ignored).
     checkpoint_seconds
         Minimum wall time between two snapshots of a chain. [s]
+    observations
+        The outputs' error models (:mod:`bayescal.emulator.noise`: one
+        ``lambda*`` per output, AR(1) errors); default: the paper's one white
+        output with ``assembled.lam_star_prior``. NUTS needs one white output.
 
     Returns
     -------
@@ -294,7 +406,15 @@ def calibrate(
         assembled.lam_star_prior,
         list(prior_map.values()),
         algebra=algebra,
+        observations=observations,
     )
+    if sampler == "nuts" and not target.plain:
+        raise ConfigError(
+            "sampler 'nuts' samples one output with white errors; this calibration has "
+            f"{target.prior_terms.n_outputs} output(s) and {target.prior_terms.n_phi} AR(1) "
+            "coefficient(s)",
+            hint="use sampler 'mwg'",
+        )
     starts = default_starts(target, n_chains, seed)
     if sampler == "nuts":
         return _calibrate_nuts(
@@ -307,7 +427,7 @@ def calibrate(
         n_chains=n_chains,
         seed=seed,
         backend=backend,
-        names=(*assembled.parameter_names, *LAMBDA_NAMES),
+        names=(*assembled.parameter_names, *target.aux_names),
         callback=callback,
         checkpoint_dir=checkpoint_dir,
         checkpoint_seconds=checkpoint_seconds,
@@ -319,12 +439,13 @@ def calibrate(
         names=assembled.parameter_names,
         priors=prior_map,
         unit_draws=draws[..., :t],
-        lam=draws[..., t],
-        lam_star=draws[..., t + 1],
         log_density=chains.log_density,
         acceptance=chains.acceptance,
         seed=int(seed),
         algebra=algebra,
+        aux=draws[..., t:],
+        aux_names=target.aux_names,
+        noise=() if observations is None else observations.outputs,
     )
 
 

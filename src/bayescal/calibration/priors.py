@@ -19,12 +19,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy import special
 
 from bayescal.design import BetaPrior, Prior, UniformPrior, log_gamma
+from bayescal.emulator.noise import DELTA_RANGE, PHI_MAX
 from bayescal.errors import ConfigError
 
 __all__ = ["CalibrationPriors", "ThetaPriors", "log_gamma_array"]
@@ -74,19 +76,34 @@ class ThetaPriors:
 
 @dataclass(frozen=True)
 class CalibrationPriors:
-    """Priors of ``[u_1 .. u_t, lambda, lambda*]``.
+    """Priors of ``[u_1 .. u_t, lambda, lambda*_1 .. lambda*_O, phi_1 .. phi_A]``.
+
+    ``O`` is the number of calibrated outputs (one observation precision each),
+    ``A`` the number with AR(1) errors (one coefficient each, uniform on
+    ``(-PHI_MAX, PHI_MAX)``; :mod:`bayescal.emulator.noise`). One white output
+    gives the paper's ``[u, lambda, lambda*]``.
 
     Parameters
     ----------
     theta
         One prior per calibration parameter, in the order of ``u``.
-    lam, lam_star
-        ``(shape, rate)`` of the Gamma priors of ``lambda`` and ``lambda*``.
+    lam
+        ``(shape, rate)`` of the Gamma prior of ``lambda``.
+    lam_star
+        ``(shape, rate)`` of the Gamma prior of ``lambda*``, or one such pair per output.
+    n_phi
+        Number of AR(1) coefficients ``A``.
+    n_delta
+        Number of model-discrepancy relative variances ``D`` (after the ``phi``;
+        log-uniform on :data:`~bayescal.emulator.noise.DELTA_RANGE`).
     """
 
     theta: tuple[Prior, ...]
     lam: tuple[float, float]
-    lam_star: tuple[float, float]
+    lam_star: Any
+    n_phi: int = 0
+    n_delta: int = 0
+    lam_stars: tuple[tuple[float, float], ...] = field(init=False, repr=False, compare=False)
     theta_priors: ThetaPriors = field(init=False, repr=False, compare=False)
     uniform: tuple[int, ...] = field(init=False, repr=False, compare=False)
     is_uniform: tuple[bool, ...] = field(init=False, repr=False, compare=False)
@@ -96,30 +113,56 @@ class CalibrationPriors:
     def __post_init__(self) -> None:
         object.__setattr__(self, "theta", tuple(self.theta))
         lam = (float(self.lam[0]), float(self.lam[1]))
-        lam_star = (float(self.lam_star[0]), float(self.lam_star[1]))
+        pairs = self.lam_star
+        if len(pairs) == 2 and np.ndim(pairs[0]) == 0:
+            pairs = (pairs,)
+        stars = tuple((float(a), float(b)) for a, b in pairs)
         object.__setattr__(self, "lam", lam)
-        object.__setattr__(self, "lam_star", lam_star)
+        object.__setattr__(self, "lam_stars", stars)
+        object.__setattr__(self, "lam_star", stars[0])
         theta = ThetaPriors(self.theta)
         object.__setattr__(self, "theta_priors", theta)
         is_uniform = theta.is_uniform
         object.__setattr__(self, "is_uniform", is_uniform)
         object.__setattr__(self, "uniform", tuple(k for k, u in enumerate(is_uniform) if u))
-        object.__setattr__(self, "shape_m1", np.array([lam[0] - 1.0, lam_star[0] - 1.0]))
-        object.__setattr__(self, "rate", np.array([lam[1], lam_star[1]]))
+        gammas = (lam, *stars)
+        object.__setattr__(self, "shape_m1", np.array([g[0] - 1.0 for g in gammas]))
+        object.__setattr__(self, "rate", np.array([g[1] for g in gammas]))
 
     @property
     def t(self) -> int:
         """Number of calibration parameters."""
         return len(self.theta)
 
+    @property
+    def n_outputs(self) -> int:
+        """Number of observation precisions ``O``."""
+        return len(self.lam_stars)
+
+    @property
+    def d(self) -> int:
+        """Length of the sampled vector ``t + 1 + O + A + D``."""
+        return self.t + 1 + self.n_outputs + self.n_phi + self.n_delta
+
     # ------------------------------------------------------------ one point
 
     def scalar(self, v: ArrayLike) -> float:
-        """Log prior of ``v = [u, lambda, lambda*]`` (up to a constant)."""
+        """Log prior of ``v = [u, lambda, lambda*.., phi..]`` (up to a constant)."""
         arr = np.asarray(v, dtype=float)
         t = self.t
         total = log_gamma(float(arr[t]), *self.lam)
-        total += log_gamma(float(arr[t + 1]), *self.lam_star)
+        for q, pair in enumerate(self.lam_stars):
+            total += log_gamma(float(arr[t + 1 + q]), *pair)
+        start = t + 1 + self.n_outputs
+        if self.n_phi:
+            phi = arr[start : start + self.n_phi]
+            if not np.all(np.abs(phi) < PHI_MAX):
+                return -_INF
+        if self.n_delta:
+            rel = arr[start + self.n_phi :]
+            if not np.all((rel >= DELTA_RANGE[0]) & (rel <= DELTA_RANGE[1])):
+                return -_INF
+            total -= float(np.sum(np.log(rel)))
         return self.theta_priors.scalar(arr, total)
 
     # ------------------------------------------------------------ B points
@@ -127,6 +170,11 @@ class CalibrationPriors:
     def term(self, column: FloatArray, k: int) -> FloatArray:
         """Log prior of coordinate ``k`` at the values ``column`` ``(B,)``."""
         t = self.t
+        if k >= t + 1 + self.n_outputs + self.n_phi:
+            inside = (column >= DELTA_RANGE[0]) & (column <= DELTA_RANGE[1])
+            return np.where(inside, -np.log(np.where(inside, column, 1.0)), -_INF)
+        if k >= t + 1 + self.n_outputs:
+            return np.where(np.abs(column) < PHI_MAX, 0.0, -_INF)
         if k >= t:
             shape_m1, rate = float(self.shape_m1[k - t]), float(self.rate[k - t])
             if column.min() > 0.0:
@@ -140,14 +188,21 @@ class CalibrationPriors:
         return np.asarray(self.theta[k].logpdf_unit(column), dtype=float)
 
     def batch(self, points: FloatArray) -> FloatArray:
-        """Log prior density per row of ``points`` ``(B, t + 2)`` (up to a constant)."""
+        """Log prior density per row of ``points`` ``(B, d)`` (up to a constant)."""
         t = self.t
-        prec = points[:, t : t + 2]
+        n_prec = 1 + self.n_outputs
+        prec = points[:, t : t + n_prec]
         if prec.min() > 0.0:
             total = (self.shape_m1 * np.log(prec) - self.rate * prec).sum(axis=1)
         else:
             total = log_gamma_array(prec[:, 0], float(self.shape_m1[0]), float(self.rate[0]))
-            total += log_gamma_array(prec[:, 1], float(self.shape_m1[1]), float(self.rate[1]))
+            for q in range(1, n_prec):
+                total += log_gamma_array(prec[:, q], float(self.shape_m1[q]), float(self.rate[q]))
+        if self.n_phi:
+            phi = points[:, t + n_prec : t + n_prec + self.n_phi]
+            total = np.where((np.abs(phi) < PHI_MAX).all(axis=1), total, -_INF)
+        for k in range(t + n_prec + self.n_phi, self.d):
+            total = total + self.term(points[:, k], k)
         if self.uniform:
             u = points[:, list(self.uniform)]
             inside = ((u >= 0.0) & (u <= 1.0)).all(axis=1)

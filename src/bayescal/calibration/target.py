@@ -34,8 +34,11 @@ from bayescal.calibration.priors import CalibrationPriors
 from bayescal.design import Prior
 from bayescal.emulator.gp import Emulator
 from bayescal.emulator.kernel import FloatArray
+from bayescal.emulator.kron import Lru
+from bayescal.emulator.noise import DELTA_RANGE, PHI_MAX, GlsPieces, ObservationModel
 from bayescal.errors import ConfigError
 from bayescal.mcmc.chains import ChainBackend, Chains, dispersed_starts, run_chains
+from bayescal.mcmc.samplers.lockstep import LockstepTarget, RowLoop, Stateless
 from bayescal.mcmc.samplers.mwg import MetropolisWithinGibbs
 
 __all__ = [
@@ -54,7 +57,13 @@ BoolArray = NDArray[np.bool_]
 
 
 class CalibrationPosterior:
-    """Log posterior of eq. 16 at ``[u_1 .. u_t, lambda, lambda*]``, up to a constant.
+    """Log posterior of eq. 16 at ``[u_1 .. u_t, lambda, lambda*.., phi..]``, up to a constant.
+
+    With one white output (``observations`` omitted, or one white output) the
+    vector is the paper's ``[u, lambda, lambda*]``. With an
+    :class:`~bayescal.emulator.noise.ObservationModel` it holds one
+    ``lambda*`` per output and one AR(1) coefficient ``phi`` per output with
+    AR(1) errors (:mod:`bayescal.emulator.noise`).
 
     Picklable (for chains in worker processes). Non-positive-definite
     covariances count as zero density. Offers its lockstep form
@@ -63,11 +72,18 @@ class CalibrationPosterior:
     Parameters
     ----------
     algebra
-        Likelihood back end (Kronecker or dense) built with the MAP kernels.
+        Likelihood back end (Kronecker or dense) built with the MAP kernels and
+        the least-squares observed weights.
     priors
         One prior per parameter, in the order of ``u``.
-    lam_prior, lam_star_prior
-        ``(shape, rate)`` of the Gamma priors of ``lambda`` and ``lambda*``.
+    lam_prior
+        ``(shape, rate)`` of the Gamma prior of ``lambda``.
+    lam_star_prior
+        ``(shape, rate)`` of the Gamma prior of ``lambda*`` (one white output);
+        ignored with ``observations``.
+    observations
+        The outputs' error models and the measured periods; their ``lambda*``
+        priors are eq. 7-updated for white outputs.
     """
 
     def __init__(
@@ -75,11 +91,37 @@ class CalibrationPosterior:
         algebra: CalibrationAlgebra,
         priors: Sequence[Prior],
         lam_prior: tuple[float, float],
-        lam_star_prior: tuple[float, float],
+        lam_star_prior: tuple[float, float] | None = None,
+        observations: ObservationModel | None = None,
     ) -> None:
         self.algebra = algebra
-        self.prior_terms = CalibrationPriors(tuple(priors), lam_prior, lam_star_prior)
+        self.observations = observations
+        if observations is None:
+            if lam_star_prior is None:
+                raise ConfigError("give lam_star_prior or an observation model")
+            stars: tuple[tuple[float, float], ...] = (lam_star_prior,)
+        else:
+            stars = tuple(
+                observations.white_prior(q) if o.model == "white" else o.prior
+                for q, o in enumerate(observations.outputs)
+            )
+        n_phi = 0 if observations is None else len(observations.ar_outputs)
+        n_delta = 0 if observations is None else len(observations.delta_outputs)
+        self.prior_terms = CalibrationPriors(tuple(priors), lam_prior, stars, n_phi, n_delta)
         self.t = self.prior_terms.t
+        self._reset()
+
+    def _reset(self) -> None:
+        self._observed_memo = Lru(2)
+
+    def __getstate__(self) -> dict[str, Any]:
+        state = self.__dict__.copy()
+        state.pop("_observed_memo")
+        return state
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        self.__dict__.update(state)
+        self._reset()
 
     @property
     def priors(self) -> tuple[Prior, ...]:
@@ -93,8 +135,30 @@ class CalibrationPosterior:
 
     @property
     def lam_star_prior(self) -> tuple[float, float]:
-        """``(shape, rate)`` of the Gamma prior of ``lambda*``."""
+        """``(shape, rate)`` of the Gamma prior of the (first) ``lambda*``."""
         return self.prior_terms.lam_star
+
+    @property
+    def d(self) -> int:
+        """Length of the sampled vector."""
+        return self.prior_terms.d
+
+    @property
+    def aux_names(self) -> tuple[str, ...]:
+        """Names of the coordinates after theta*: ``lambda``, the ``lambda*``, the ``phi``."""
+        if self.observations is None:
+            return LAMBDA_NAMES
+        return ("lambda", *self.observations.names())
+
+    @property
+    def coupled(self) -> bool:
+        """Whether an output has AR(1) errors (its weights' noise coupled, ``phi`` sampled)."""
+        return self.observations is not None and self.observations.coupled
+
+    @property
+    def plain(self) -> bool:
+        """One white output without a discrepancy: the paper's ``[u, lambda, lambda*]``."""
+        return self.prior_terms.d == self.t + 2
 
     def grid(self) -> StackedGrid:
         """The fixed arrays of eq. 16 (the JAX route needs the Kronecker back end)."""
@@ -107,24 +171,96 @@ class CalibrationPosterior:
         return grid
 
     def log_prior(self, v: ArrayLike) -> float:
-        """Log prior density of ``[u, lambda, lambda*]`` (up to a constant)."""
+        """Log prior density of the sampled vector (up to a constant)."""
         return self.prior_terms.scalar(v)
 
     def __call__(self, v: ArrayLike) -> float:
-        """Log posterior (eq. 16) at ``v = [u_1 .. u_t, lambda, lambda*]``."""
+        """Log posterior (eq. 16) at ``v = [u_1 .. u_t, lambda, lambda*.., phi..]``."""
         arr = np.asarray(v, dtype=float)
         prior = self.log_prior(arr)
         if prior == -math.inf:
             return prior
+        t = self.t
         try:
-            lik = self.algebra.logpdf(arr[: self.t], float(arr[self.t]), float(arr[self.t + 1]))
+            if self.plain:
+                lik = self.algebra.logpdf(arr[:t], float(arr[t]), float(arr[t + 1]))
+            else:
+                lik = self._likelihood(arr)
         except np.linalg.LinAlgError:
             return -math.inf
         return prior + lik
 
-    def lockstep(self) -> BatchedPosterior:
-        """The same log posterior for ``B`` chains in lockstep (batched likelihood)."""
-        return BatchedPosterior(self.algebra, self.prior_terms)
+    def _likelihood(self, arr: FloatArray) -> float:
+        """Several outputs, or AR(1) errors (:mod:`bayescal.emulator.noise`)."""
+        obs = self.observations
+        assert obs is not None  # only called with an observation model
+        t, n_out, n_phi = self.t, obs.n_outputs, self.prior_terms.n_phi
+        lam_star = arr[t + 1 : t + 1 + n_out]
+        a = 1.0 / (float(arr[t]) * self.algebra.data.ktk)
+        a_star = obs.white_nuggets(lam_star)
+        delta = self._delta(arr[t + 1 + n_out + n_phi :])
+        if not self.coupled:
+            return self.algebra.pieces_nuggets(arr[:t], a, a_star, delta).logpdf
+        phi = arr[t + 1 + n_out : t + 1 + n_out + n_phi]
+        algebra, pieces = self._observed_memo.get(phi.tobytes(), lambda: self._observed(phi))
+        groups = [
+            (obs.outputs[q].bases, piece.h0_inv / float(lam_star[q]))
+            for q, piece in zip(obs.ar_outputs, pieces, strict=True)
+        ]
+        total = algebra.pieces_grouped(arr[:t], a, a_star, groups, delta).logpdf
+        for q, piece in zip(obs.ar_outputs, pieces, strict=True):
+            total += obs.remainder(q, piece, float(lam_star[q]))
+        return total
+
+    def _delta(self, rel: FloatArray) -> FloatArray | None:
+        """Per-basis discrepancy variances ``r_o tau_j^-1`` from the outputs' ``r``."""
+        obs = self.observations
+        if obs is None or not obs.delta_outputs:
+            return None
+        variances = np.array([k.variance for k in self.algebra.data.kernels])
+        out = np.zeros(variances.size)
+        for q, r in zip(obs.delta_outputs, rel, strict=True):
+            bases = list(obs.outputs[q].bases)
+            out[bases] = float(r) * variances[bases]
+        return out
+
+    def _observed(self, phi: FloatArray) -> tuple[CalibrationAlgebra, list[GlsPieces]]:
+        """The algebra with the AR(1) outputs' GLS weights at ``phi``, and their pieces."""
+        obs = self.observations
+        assert obs is not None
+        w_star = np.array(self.algebra.data.w_star, dtype=float)
+        pieces = []
+        for q, value in zip(obs.ar_outputs, phi, strict=True):
+            piece = obs.gls(q, float(value))
+            w_star[:, list(obs.outputs[q].bases)] = piece.w_hat
+            pieces.append(piece)
+        return self.algebra.with_observations(w_star), pieces
+
+    def lockstep_preferred(self, n_chains: int, workers: int) -> bool:
+        """Whether ``backend="auto"`` runs the chains in lockstep (in groups over ``workers``).
+
+        Yes where the batched likelihood exists (:meth:`lockstep`: one white
+        output, the Kronecker algebra, every period observed): there a lockstep
+        group of two or more chains costs less per chain than one serial chain
+        at every size measured (``docs/benchmarks.md``), so groups spread over
+        the workers beat one chain per worker. Elsewhere the lockstep form loops
+        over the rows, no faster than one chain: worker processes instead.
+        """
+        del n_chains, workers  # the answer does not depend on them (see above)
+        if not self.plain or self.algebra.stacked_grid() is None:
+            return False
+        data = self.algebra.data
+        return bool(data.obs_index.size == data.x.shape[0])
+
+    def lockstep(self) -> LockstepTarget:
+        """The same log posterior for ``B`` chains in lockstep.
+
+        The batched likelihood (:class:`BatchedPosterior`) for one white
+        output; otherwise the rows are evaluated one by one.
+        """
+        if self.plain:
+            return BatchedPosterior(self.algebra, self.prior_terms)
+        return Stateless(RowLoop(self))
 
 
 class BatchedPosterior:
@@ -168,23 +304,29 @@ class BatchedPosterior:
         out: FloatArray = prior + np.where(self._session.ok, self._session.values, -math.inf)
         return out
 
-    def propose(self, points: FloatArray, coordinate: int) -> FloatArray:
-        """Log posterior with ``coordinate`` of the current points replaced."""
+    def propose(self, points: FloatArray, coordinate: int | tuple[int, ...]) -> FloatArray:
+        """Log posterior with ``coordinate`` of the current points replaced (a tuple:
+        several coordinates of theta*, moved jointly)."""
         session, t = self._session, self.t
         if session is None:
             return self(points)
+        moved = coordinate if isinstance(coordinate, tuple) else (coordinate,)
+        if len(moved) > 1 and max(moved) >= t:
+            raise ValueError(f"a joint move must stay within theta* (0..{t - 1}), got {moved}")
         terms = self._prior_terms.copy()
-        terms[:, coordinate] = self.priors.term(points[:, coordinate], coordinate)
+        for k in moved:
+            terms[:, k] = self.priors.term(points[:, k], k)
         prior = terms.sum(axis=1)
+        coordinate = moved[0]
         if coordinate < t:
             values, ok = session.propose_theta(points[:, :t])
         else:
             # Rows outside the prior are evaluated at their current precision (-inf anyway).
             column = points[:, coordinate]
             current = session.lam if coordinate == t else session.lam_star
-            moved = np.where(column > 0.0, column, current)
+            value = np.where(column > 0.0, column, current)
             move = session.propose_lam if coordinate == t else session.propose_lam_star
-            values, ok = move(moved)
+            values, ok = move(value)
         self._pending_terms = terms
         out: FloatArray = prior + np.where(ok, values, -math.inf)
         return out
@@ -221,10 +363,11 @@ class BatchedPosterior:
 def build_target(
     emulator: Emulator,
     w_star: ArrayLike,
-    lam_star_prior: tuple[float, float],
+    lam_star_prior: tuple[float, float] | None,
     priors: Sequence[Prior],
     *,
     algebra: Kind = "kronecker",
+    observations: ObservationModel | None = None,
 ) -> CalibrationPosterior:
     """The calibration log posterior from the emulator and the observed weights.
 
@@ -236,11 +379,15 @@ def build_target(
     w_star
         Observed weights ``W*`` of the training periods ``(m*, p)`` (eq. 13). [-]
     lam_star_prior
-        ``(shape, rate)`` of the Gamma prior of ``lambda*`` (eq. 7 for ``Y*``).
+        ``(shape, rate)`` of the Gamma prior of ``lambda*`` (eq. 7 for ``Y*``);
+        ``None`` with ``observations``.
     priors
         The theta* priors on the design's bounds, in the emulator's parameter order.
     algebra
         ``"kronecker"`` (fast, default) or ``"dense"`` (reference).
+    observations
+        The outputs' error models (:mod:`bayescal.emulator.noise`); default:
+        one white output with ``lam_star_prior``.
     """
     if len(priors) != len(emulator.parameter_names):
         raise ConfigError(
@@ -248,7 +395,7 @@ def build_target(
             f"parameters {list(emulator.parameter_names)}"
         )
     alg = emulator_algebra(emulator, w_star, algebra)
-    return CalibrationPosterior(alg, priors, emulator.lam_prior, lam_star_prior)
+    return CalibrationPosterior(alg, priors, emulator.lam_prior, lam_star_prior, observations)
 
 
 def emulator_algebra(
@@ -268,18 +415,30 @@ def emulator_algebra(
 
 def default_sampler(target: CalibrationPosterior, n_burn: int) -> MetropolisWithinGibbs:
     """Metropolis-within-Gibbs as ``calibrate`` configures it for ``target``."""
-    t = target.t
-    lower = [0.0] * (t + 2)
-    upper = [1.0] * t + [math.inf, math.inf]
-    # Logit-scale widths for theta*, ~2.4 prior log-sd for the sharply known precisions.
-    scales = [0.5] * t + [
-        2.4 / math.sqrt(target.lam_prior[0]),
-        2.4 / math.sqrt(target.lam_star_prior[0]),
-    ]
+    t, terms = target.t, target.prior_terms
+    n_prec = 1 + terms.n_outputs
+    lower = [0.0] * (t + n_prec) + [-PHI_MAX] * terms.n_phi + [DELTA_RANGE[0]] * terms.n_delta
+    upper = (
+        [1.0] * t + [math.inf] * n_prec + [PHI_MAX] * terms.n_phi + [DELTA_RANGE[1]] * terms.n_delta
+    )
+    # Logit-scale widths for theta* and phi, ~2.4 prior log-sd for the sharply
+    # known precisions (an AR(1) output's lambda* is judged by its white eq. 7 update).
+    shapes = [terms.lam[0], *_start_gammas(target)[:, 0]]
+    scales = [0.5] * t + [2.4 / math.sqrt(a) for a in shapes]
+    scales += [0.5] * terms.n_phi + [1.0] * terms.n_delta
     # Short batches and a generous cap: the widths of sharply identified
     # parameters must shrink by ~e^3 within a burn-in of a few hundred sweeps.
+    # theta* also moves jointly once per sweep: correlated parameters (a resistance
+    # split, heat loss against solar gains) form ridges that one-coordinate steps crawl.
+    joint = tuple(range(t)) if t >= 2 else ()
     return MetropolisWithinGibbs(
-        n_burn=n_burn, lower=lower, upper=upper, scales=scales, batch_size=25, max_adapt=0.25
+        n_burn=n_burn,
+        lower=lower,
+        upper=upper,
+        scales=scales,
+        batch_size=25,
+        max_adapt=0.25,
+        joint=joint,
     )
 
 
@@ -294,8 +453,30 @@ def default_starts(target: CalibrationPosterior, n_chains: int, seed: int) -> Fl
     t = target.t
     u = dispersed_starts(np.zeros(t), np.ones(t), n_chains, rng)
     lam = rng.gamma(target.lam_prior[0], 1.0 / target.lam_prior[1], n_chains)
-    lam_star = rng.gamma(target.lam_star_prior[0], 1.0 / target.lam_star_prior[1], n_chains)
-    return np.column_stack([u, lam, lam_star])
+    columns = [u, lam]
+    for shape, rate in _start_gammas(target):
+        columns.append(rng.gamma(shape, 1.0 / rate, n_chains))
+    if target.prior_terms.n_phi:
+        columns.append(rng.uniform(0.0, 0.9, (n_chains, target.prior_terms.n_phi)))
+    if target.prior_terms.n_delta:
+        low, high = np.log(DELTA_RANGE[0]), np.log(DELTA_RANGE[1])
+        span = rng.uniform(0.1, 0.6, (n_chains, target.prior_terms.n_delta))
+        columns.append(np.exp(low + span * (high - low)))
+    return np.column_stack(columns)
+
+
+def _start_gammas(target: CalibrationPosterior) -> FloatArray:
+    """Gamma ``(shape, rate)`` per output to start ``lambda*`` from, ``(O, 2)``.
+
+    The prior of a white output (eq. 7-updated, sharp); for an AR(1) output,
+    whose prior is weak, the white eq. 7 update of its data, a sensible scale.
+    """
+    obs = target.observations
+    pairs = list(target.prior_terms.lam_stars)
+    if obs is not None:
+        for q in obs.ar_outputs:
+            pairs[q] = obs.white_prior(q)
+    return np.array(pairs, dtype=float)
 
 
 def sample(
@@ -305,7 +486,7 @@ def sample(
     n_burn: int = 1000,
     n_chains: int = 4,
     seed: int = 0,
-    backend: ChainBackend = "processes",
+    backend: ChainBackend = "auto",
     names: Sequence[str] | None = None,
     callback: Callable[[int], None] | None = None,
     checkpoint_dir: str | os.PathLike[str] | None = None,
@@ -322,8 +503,10 @@ def sample(
     n_draws, n_burn, n_chains, seed
         Kept draws and burn-in sweeps per chain, chains, root seed.
     backend
-        ``"processes"``, ``"serial"`` or ``"vectorised"`` (lockstep, batched
-        likelihood); see :func:`bayescal.mcmc.chains.run_chains`.
+        ``"auto"`` (lockstep groups over the workers where the batched
+        likelihood exists, else worker processes), ``"processes"``,
+        ``"serial"``, ``"vectorised"`` (lockstep, batched likelihood) or
+        ``"vectorised-processes"``; see :func:`bayescal.mcmc.chains.run_chains`.
     names
         Coordinate names (default: ``x0, x1, ...``).
     callback, checkpoint_dir, checkpoint_seconds

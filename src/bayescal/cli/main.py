@@ -21,6 +21,8 @@ from bayescal.errors import BayescalError
 
 F = TypeVar("F", bound=Callable[..., Any])
 EXIT_USER_ERROR = 2
+#: ``bayescal run --strict``: an MCMC diagnostic failed (results written all the same).
+EXIT_DIAGNOSTICS = 3
 
 
 def user_errors(command: F) -> F:
@@ -194,6 +196,13 @@ def init(example: str | None, directory: Path | None, force: bool) -> None:
 )
 @click.option("--scheduler", default=None, help="Dask scheduler address (implies --backend dask).")
 @click.option("--quiet", "-q", is_flag=True, help="No progress bars or notes; errors only.")
+@click.option(
+    "--strict",
+    is_flag=True,
+    help="Exit with status 3 when an MCMC diagnostic failed (R-hat > 1.01, bulk or tail "
+    "ESS < 400, stuck chains, divergences) in the calibration or the difference process; "
+    "the results are written all the same.",
+)
 @user_errors
 def run(
     study: Path,
@@ -203,6 +212,7 @@ def run(
     backend: str | None,
     scheduler: str | None,
     quiet: bool,
+    strict: bool,
 ) -> None:
     """Calibrate: design, simulate, emulator, calibrate, discrepancy, predict, report.
 
@@ -228,6 +238,15 @@ def run(
         click.echo(describe(res))
         if res.report is not None:
             click.echo(f"report: {res.report}")
+    failed = res.diagnostic_warnings()
+    if strict and failed:
+        click.echo(
+            f"error: {len(failed)} MCMC diagnostic(s) failed (--strict): {failed[0]}"
+            + (f" (and {len(failed) - 1} more, see bayescal.log)" if len(failed) > 1 else "")
+            + "; run longer chains ([calibration] / [discrepancy] burn and samples)",
+            err=True,
+        )
+        raise SystemExit(EXIT_DIAGNOSTICS)
 
 
 @main.command()
@@ -257,3 +276,81 @@ def report(study: Path) -> None:
     with writing(out), OutputLock(out, command="report"):
         path = write_study_report(results)
     click.echo(f"report: {path}")
+
+
+@main.command()
+@click.argument("studies", nargs=-1, type=click.Path(path_type=Path))
+@click.option(
+    "--output",
+    "-o",
+    type=click.Path(path_type=Path),
+    default=Path("compare"),
+    show_default=True,
+    help="Folder for compare.csv, compare-periods.csv, compare.png and compare.md.",
+)
+@click.option(
+    "--max-refits",
+    type=click.IntRange(min=0),
+    default=5,
+    show_default=True,
+    help="Exact refits per study at most, for periods whose Pareto k exceeds 0.7 "
+    "(worst first); each runs the study's [calibration] chains again, without the period.",
+)
+@click.option(
+    "--draws",
+    type=click.IntRange(min=10),
+    default=250,
+    show_default=True,
+    help="Posterior draws per chain used for the scores (thinned evenly).",
+)
+@click.option("--jobs", "-j", type=click.IntRange(min=1), default=None, help="Simulation workers.")
+@click.option(
+    "--backend",
+    type=click.Choice(["serial", "processes", "dask"]),
+    default=None,
+    help="Simulation backend [default: the study's runner.backend].",
+)
+@click.option("--scheduler", default=None, help="Dask scheduler address (implies --backend dask).")
+@click.option("--quiet", "-q", is_flag=True, help="No progress bars or notes; the table only.")
+@user_errors
+def compare(
+    studies: tuple[Path, ...],
+    output: Path,
+    max_refits: int,
+    draws: int,
+    jobs: int | None,
+    backend: str | None,
+    scheduler: str | None,
+    quiet: bool,
+) -> None:
+    """Rank variants of a study by leave-one-period-out cross-validation.
+
+    STUDIES are two or more study files or folders: variants of one
+    calibration (parameter sets, priors, error models, discrepancy on or off)
+    on the same measured data. Each is run up to its calibrate stage (or its
+    finished stages are reused); then every training period is left out in
+    turn and the measurements of that period are scored by their log density
+    under the calibration on the others (PSIS, with exact refits where the
+    Pareto k exceeds 0.7). The variants are ranked by the sum, the ELPD, with
+    the difference to the best and its standard error. Only the training
+    periods are read: the test window is left for the final metrics of the
+    variant chosen.
+
+    Writes compare.csv (the ranking), compare-periods.csv (every period of
+    every variant), compare.png and compare.md into --output; each study keeps
+    its scores in OUTPUT_DIR/leave-period-out.npz for the next comparison.
+    """
+    from bayescal.cli.progress import comparison_text, progress_options
+    from bayescal.pipeline import Options
+    from bayescal.pipeline.compare import compare as compare_studies
+
+    options = Options(backend=backend, jobs=jobs, scheduler=scheduler, **progress_options(quiet))
+    result = compare_studies(
+        studies,
+        output=output,
+        options=options,
+        max_refits=max_refits,
+        draws_per_chain=draws,
+        say=(lambda _: None) if quiet else click.echo,
+    )
+    click.echo(comparison_text(result.table, result.notes, result.files))

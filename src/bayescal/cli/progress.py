@@ -3,6 +3,7 @@
 * :func:`study_summary` -- what ``bayescal validate`` prints;
 * :func:`metrics_text` -- the metrics table of ``bayescal simulate``;
 * :func:`describe` -- what ``bayescal run`` and ``bayescal show`` print;
+* :func:`comparison_text` -- the ranking ``bayescal compare`` prints;
 * :func:`progress_options` -- the progress bars of the simulations and the
   MCMC stages (tqdm), as :class:`bayescal.pipeline.Options` takes them.
 
@@ -11,8 +12,10 @@ The metric columns of every table come from :func:`bayescal.metrics.metric_colum
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from typing import TYPE_CHECKING, Any
+
+import numpy as np
 
 from bayescal.metrics import KEY_COLUMNS, Metrics, metric_columns
 from bayescal.runner import Progress
@@ -22,6 +25,7 @@ if TYPE_CHECKING:
 
 __all__ = [
     "budget_line",
+    "comparison_text",
     "describe",
     "mcmc_bar",
     "metrics_text",
@@ -30,6 +34,11 @@ __all__ = [
 ]
 
 Tick = Callable[[int], None]
+#: Under the metrics of ``bayescal show``: what the test window was used for.
+TEST_WINDOW_NOTE = (
+    "The test window is read only for these final metrics; parameters, priors and error "
+    "models are chosen on the training periods (bayescal compare)."
+)
 
 
 def study_summary(study: Any, measured: Any) -> str:
@@ -134,6 +143,23 @@ def describe(res: Results) -> str:
     if res.posterior is not None:
         table = res.posterior.summary()
         lines += ["", "posterior (physical units):", table.to_string(float_format="{:.5g}".format)]
+        sds = res.posterior.noise_sd()
+        for o in res.posterior.noise:
+            sd = sds[o.name].reshape(-1)
+            low, high = np.percentile(sd, [2.5, 97.5])
+            lines.append(
+                f"measurement noise of {o.name} ({o.model}): SD {np.mean(sd):.4g} {o.unit} "
+                f"[{low:.4g}, {high:.4g}]"
+            )
+        from bayescal.calibration.identifiability import identifiability
+
+        ident = identifiability(res.posterior)
+        lines += ["", "what the data fix (principal directions of the posterior vs the prior):"]
+        lines += [f"  {line}" for line in ident.lines()]
+        contraction = ", ".join(
+            f"{n} {100 * c:.0f} %" for n, c in zip(ident.names, ident.contraction, strict=True)
+        )
+        lines.append(f"  prior-to-posterior contraction: {contraction}")
         if res.posterior.warnings:
             lines += ["", "diagnostics: NOT all passed"]
             lines += [f"  warning: {w}" for w in res.posterior.warnings]
@@ -155,6 +181,7 @@ def describe(res: Results) -> str:
         ]
         cols = [c for c in cols if c in m.columns]  # older runs lack newer columns
         lines.append(m[cols].to_string(index=False, float_format="{:.4g}".format))
+        lines.append(TEST_WINDOW_NOTE)
     if res.simulations is not None and res.simulations.failures:
         lines += ["", f"{len(res.simulations.failures)} failed run(s):"]
         lines += [f"  run {f.index}: {f.error_type}: {f.message}" for f in res.simulations.failures]
@@ -222,3 +249,36 @@ def simulation_bar(total: int, desc: str = "simulations") -> tuple[Progress, Cal
         bar.set_postfix(failed=failed, refresh=True)
 
     return progress, bar.close
+
+
+def comparison_text(table: Any, notes: Sequence[str], files: Mapping[str, Any]) -> str:
+    """The ranking of ``bayescal compare``: table, verdicts, notes and the files written."""
+    from bayescal.report.compare import SMALL_DIFFERENCE, verdict
+
+    width = max(20, 1 + max(len(str(v)) for v in table["variant"]))
+    head = (
+        f"{'rank':>4}  {'variant':<{width}}{'ELPD':>11}{'SE':>8}{'diff':>10}{'SE diff':>9}"
+        f"{'p_loo':>8}{'k>0.7':>7}{'refits':>7}"
+    )
+    lines = [
+        f"leave-one-period-out ELPD over {int(table['periods'].iloc[0])} training periods "
+        "(log density of the measurements in their units, nats; higher is better):",
+        head,
+    ]
+    for _, r in table.iterrows():
+        lines.append(
+            f"{int(r['rank']):>4}  {r['variant']!s:<{width}}{r['elpd']:>11.1f}{r['se']:>8.1f}"
+            f"{r['elpd_diff']:>10.1f}{r['se_diff']:>9.1f}{r['p_loo']:>8.1f}"
+            f"{int(r['k_high']):>7}{int(r['refits']):>7}"
+        )
+    lines.append("")
+    lines += [
+        f"{r['variant']}: {verdict(r['elpd_diff'], r['se_diff'])}" for _, r in table.iterrows()
+    ]
+    lines.append(
+        f"(a difference counts when it exceeds {SMALL_DIFFERENCE:g} nats and twice its SE; "
+        "the test window was not read)"
+    )
+    lines += [f"note: {n}" for n in notes]
+    lines += [f"wrote {path}" for path in files.values()]
+    return "\n".join(lines)

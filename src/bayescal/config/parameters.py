@@ -96,3 +96,15 @@ class Parameter(Section):
             unit=self.unit,
             description=self.description,
         )
+
+
+class DerivedSpec(Section):
+    """``[derived.<name>]``: a quantity computed from the parameters at every posterior draw."""
+
+    expression: str = field_doc(
+        "Arithmetic of parameter names, numbers, + - * / ** and log, log10, exp, sqrt, abs "
+        "(e.g. the wall's resistance '0.3 / k_brick + 0.08 / k_eps').",
+        "0.3 / k_brick + 0.08 / k_eps",
+    )
+    unit: str = field_doc("Unit of the result, for tables and reports.", "m²·K/W", default="")
+    description: str = field_doc("Text for reports.", "resistance of brick and EPS", default="")

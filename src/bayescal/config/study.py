@@ -45,14 +45,15 @@ from bayescal.config.base import (
 )
 from bayescal.config.data import DataSection
 from bayescal.config.messages import format_errors
-from bayescal.config.parameters import Parameter
+from bayescal.config.parameters import DerivedSpec, Parameter
 from bayescal.config.simulators import SimulatorSection
 from bayescal.config.targets import KIND_UNITS, SENSOR_PREFIX, normal_unit, parse_sensor_target
-from bayescal.errors import ConfigError
-from bayescal.glossary import GLOSSARY
+from bayescal.errors import ConfigError, DataError
+from bayescal.expressions import Expression
+from bayescal.glossary import GLOSSARY, glossary_quantity
 from bayescal.mcmc.nuts import NUTS_MIN_WARMUP
 from bayescal.optional import module_installed
-from bayescal.units import same_scale
+from bayescal.units import same_scale, spread_to_internal
 
 if TYPE_CHECKING:
     from bayescal.design import Prior
@@ -101,6 +102,49 @@ class StudySection(Section):
         return resolve_path(value, info, "a folder name")
 
 
+Spread = float | str
+
+
+class OutputError(Section):
+    """``[outputs.errors.<name>]``: the measurement error model of one measured output
+    (calibrated or held out)."""
+
+    model: Literal["white", "ar1"] = field_doc(
+        "Errors independent from sample to sample ('white', the paper) or AR(1) within a "
+        "period ('ar1': residuals that drift, coefficient sampled). Choose by cross-validation "
+        "on the training periods (bayescal compare), not by the test window.",
+        "ar1",
+        default="white",
+    )
+    sd: Spread | list[Spread] | None = field_doc(
+        "The sensor's accuracy as one standard deviation, or a range [low, high] taken as "
+        "the central 95 % interval of the noise SD; a number in the output's unit or text "
+        "with a unit ('0.1 W/m2', '0.2 K'). It becomes the prior of the output's observation "
+        "precision (centred on it, or spanning the range). Without it, a weak prior lets the "
+        "data decide.",
+        "0.1 W/m2",
+        ["0.05 W/m2", "0.3 W/m2"],
+        default=None,
+    )
+
+    discrepancy: bool = field_doc(
+        "Add a model discrepancy to this output inside the calibration's likelihood: a "
+        "Gaussian process over the periods' conditions x with the emulator's correlation "
+        "and a sampled variance (log-uniform prior from 1e-4 to 1 of the emulator's). "
+        "Systematic misfit then widens the parameters' intervals instead of biasing "
+        "them with false confidence.",
+        True,
+        default=False,
+    )
+
+    @field_validator("sd")
+    @classmethod
+    def _sd_shape(cls, value: Any) -> Any:
+        if isinstance(value, list) and len(value) != 2:
+            raise ValueError(f"give one sd or a range [low, high], got {len(value)} values")
+        return value
+
+
 class OutputsSection(Section):
     """``[outputs]``: the measured outputs to calibrate on."""
 
@@ -110,6 +154,69 @@ class OutputsSection(Section):
         ["heat_flux_in"],
         min_length=1,
     )
+    errors: dict[str, OutputError] = field_doc(
+        "Measurement error model per calibrated output (default: white errors, weak prior); "
+        "for a held-out output its sd (required) is the sensor noise of its band.",
+        {"heat_flux_in": {"model": "ar1", "sd": "0.1 W/m2"}},
+        default_factory=dict,
+    )
+    held_out: list[str] = field_doc(
+        "Measured outputs predicted but never calibrated on: held-out sensors that test the "
+        "calibrated model where it was not fitted (a temperature inside the wall when the "
+        "flux is calibrated). Each needs [outputs.errors.<name>] sd, the sensor's accuracy; "
+        "its band is the simulator re-run at posterior draws plus that noise (needs "
+        "[predict] method = 'simulator'). Its metrics are reported on both windows, both "
+        "unseen by the calibration.",
+        ["temp_interface_2"],
+        default_factory=list,
+    )
+
+    def calibration_dump(self) -> dict[str, Any]:
+        """The section without the held-out outputs (what the emulator and calibration read)."""
+        return {
+            "calibrate": list(self.calibrate),
+            "errors": {
+                name: spec.model_dump(mode="json")
+                for name, spec in self.errors.items()
+                if name not in self.held_out
+            },
+        }
+
+    def noise_sd(self, name: str) -> float | tuple[float, float] | None:
+        """The stated accuracy of output ``name`` in its internal unit (``None`` if not given).
+
+        Raises
+        ------
+        bayescal.errors.ConfigError
+            For text that is not "<number> <unit>" with a unit of the output's dimension.
+        """
+        spec = self.errors.get(name)
+        if spec is None or spec.sd is None:
+            return None
+        values = spec.sd if isinstance(spec.sd, list) else [spec.sd]
+        out = [_spread(v, name) for v in values]
+        return out[0] if len(out) == 1 else (out[0], out[1])
+
+
+def _spread(value: Spread, name: str) -> float:
+    """One noise SD in the internal unit of output ``name``."""
+    if not isinstance(value, str):
+        return float(value)
+    parts = value.split(maxsplit=1)
+    quantity = glossary_quantity(name)
+    try:
+        number = float(parts[0])
+        if len(parts) == 1:
+            return number
+        if quantity is None:
+            raise DataError(f"{name!r} is not a glossary name, its unit is unknown")
+        return spread_to_internal(number, parts[1].strip(), quantity.dimension)
+    except (ValueError, DataError) as exc:
+        detail = exc.one_line() if isinstance(exc, DataError) else "not a number"
+        raise ConfigError(
+            f"outputs.errors.{name}.sd: {value!r} is not '<number> <unit>' ({detail})",
+            hint="write e.g. sd = '0.1 W/m2' or a plain number in the output's unit",
+        ) from None
 
 
 def _length(value: object) -> object:
@@ -196,17 +303,41 @@ class EmulatorSection(Section):
         ge=0,
         le=7,
     )
+    training: Literal["map", "mcmc"] = field_doc(
+        "How the GP hyperparameters' MAP is found: 'map' (multi-start L-BFGS-B with the "
+        "exact gradient, stopped by its convergence criteria, and a Laplace approximation "
+        "for their uncertainty; at 500 runs x 200 periods x 5 bases many times faster than "
+        "'mcmc' for the same MAP, docs/benchmarks.md) or 'mcmc' (the paper's "
+        "Metropolis-within-Gibbs chains, burn and samples below, best draw refined).",
+        "mcmc",
+        default="map",
+    )
     burn: int = field_doc(
-        "Hyperparameter MCMC burn-in sweeps per chain (2 chains). The emulator uses the "
-        "MAP (best draw refined by L-BFGS-B); on the wall example 2 x (500 + 1000) and "
-        "2 x (1000 + 2000) sweeps gave the same MAP and leave-one-run-out RMSE.",
+        "training = 'mcmc': hyperparameter MCMC burn-in sweeps per chain (2 chains). The "
+        "emulator uses the MAP (best draw refined by L-BFGS-B); on the wall example "
+        "2 x (500 + 1000) and 2 x (1000 + 2000) sweeps gave the same MAP and "
+        "leave-one-run-out RMSE.",
         500,
         default=500,
         ge=0,
     )
-    samples: int = field_doc("Hyperparameter MCMC sweeps kept per chain.", 1000, default=1000, ge=1)
+    samples: int = field_doc(
+        "Hyperparameter draws kept: MCMC sweeps per chain (training = 'mcmc') or draws "
+        "from the Laplace approximation (training = 'map').",
+        1000,
+        default=1000,
+        ge=1,
+    )
     algebra: Literal["kronecker", "dense"] = field_doc(
         "Linear algebra: fast Kronecker or the dense reference.", "dense", default="kronecker"
+    )
+    standardise: Literal["output", "pointwise"] = field_doc(
+        "Scale of each output before the PCA: one number per output ('output': a sensor's "
+        "noise keeps one size, so its SD is stated in the output's unit) or each sample's SD "
+        "over the design runs ('pointwise', the paper: the implied noise then varies with the "
+        "time of day). Both centre every sample on its mean over the runs.",
+        "pointwise",
+        default="output",
     )
 
     @model_validator(mode="after")
@@ -354,6 +485,12 @@ class Study(Section):
     )
     predict: PredictSection = field_doc("Predictions with bands.", default_factory=PredictSection)
     runner: RunnerSection = field_doc("Simulation runner.", default_factory=RunnerSection)
+    derived: dict[str, DerivedSpec] = field_doc(
+        "Quantities computed from the parameters at every posterior draw, beside the "
+        "simulator's own (the wall's U-value, resistance and areal heat capacity).",
+        {"R_walls": {"expression": "0.3 / k_brick + 0.08 / k_eps", "unit": "m²·K/W"}},
+        default_factory=dict,
+    )
 
     _root: Path = PrivateAttr(default_factory=Path.cwd)
     _path: Path | None = PrivateAttr(default=None)
@@ -370,12 +507,20 @@ class Study(Section):
 
     @property
     def boundary_conditions(self) -> tuple[str, ...]:
-        """Mapped columns that are not calibrated outputs."""
-        return tuple(n for n in self.data.columns if n not in self.outputs.calibrate)
+        """Mapped columns that are neither calibrated nor held-out outputs."""
+        measured = {*self.outputs.calibrate, *self.outputs.held_out}
+        return tuple(n for n in self.data.columns if n not in measured)
 
     def priors(self) -> dict[str, Prior]:
         """Parameter name -> prior (:class:`bayescal.design.Prior`), with unit and description."""
         return {name: parameter.to_prior() for name, parameter in self.parameters.items()}
+
+    def expressions(self) -> dict[str, Expression]:
+        """The ``[derived]`` expressions, parsed (names checked against the parameters)."""
+        return {
+            name: Expression.parse(spec.expression, list(self.parameters), f"derived.{name}")
+            for name, spec in self.derived.items()
+        }
 
     @field_validator("parameters")
     @classmethod
@@ -390,6 +535,7 @@ class Study(Section):
     @model_validator(mode="after")
     def _cross_checks(self) -> Study:
         problems = _target_problems(self) + _output_problems(self) + _period_problems(self)
+        problems += _derived_problems(self)
         problems += _sampler_problems(self)
         if self.design.runs < len(self.parameters) + 2:
             problems.append(
@@ -515,6 +661,72 @@ def _output_problems(study: Study) -> list[str]:
             )
         elif name in study.outputs.calibrate:
             problems.append(f"outputs.calibrate: {name!r} is an input of the {sim} simulator")
+    problems += _held_out_problems(study)
+    for name in study.outputs.errors:
+        if name not in study.outputs.calibrate and name not in study.outputs.held_out:
+            problems.append(
+                f"outputs.errors.{name}: {name!r} is neither a calibrated nor a held-out output "
+                f"(outputs.calibrate: {', '.join(study.outputs.calibrate)})"
+            )
+            continue
+        try:
+            study.outputs.noise_sd(name)
+        except ConfigError as exc:
+            problems.append(str(exc.message))
+    if study.calibration.sampler == "nuts" and (
+        len(study.outputs.calibrate) > 1
+        or any(e.model != "white" for e in study.outputs.errors.values())
+    ):
+        problems.append(
+            "calibration.sampler: 'nuts' samples one output with white errors; use 'mwg' "
+            "for several outputs or AR(1) errors"
+        )
+    return problems
+
+
+def _held_out_problems(study: Study) -> list[str]:
+    """What ``[outputs] held_out`` needs: mapped, simulated, not calibrated, an accuracy."""
+    problems = []
+    produced, sim = study.simulator.output_names(), study.simulator.type
+    for name in study.outputs.held_out:
+        where = f"outputs.held_out: {name!r}"
+        if name in study.outputs.calibrate:
+            problems.append(f"{where} is also calibrated on; a held-out sensor is never fitted")
+        if name not in study.data.columns:
+            problems.append(f"{where} is not mapped in [data.columns]")
+        if produced and name not in produced:
+            problems.append(
+                f"{where}: the {sim} simulator does not produce it; add it to the simulator's "
+                f"outputs (it produces {', '.join(produced)})"
+            )
+        spec = study.outputs.errors.get(name)
+        if spec is None or spec.sd is None:
+            problems.append(
+                f"{where} needs the sensor's accuracy for its band: [outputs.errors.{name}] "
+                "sd = '<number> <unit>'"
+            )
+        elif spec.model != "white" or spec.discrepancy:
+            problems.append(
+                f"outputs.errors.{name}: a held-out sensor takes only sd (its band's noise); "
+                "model and discrepancy apply to calibrated outputs"
+            )
+    if study.outputs.held_out and study.predict.method != "simulator":
+        problems.append(
+            "outputs.held_out: held-out sensors are predicted by re-running the simulator; "
+            "set [predict] method = 'simulator'"
+        )
+    return problems
+
+
+def _derived_problems(study: Study) -> list[str]:
+    problems = []
+    for name, spec in study.derived.items():
+        if not IDENTIFIER.match(name) or name in study.parameters:
+            problems.append(f"derived.{name}: the name must be an identifier and not a parameter")
+        try:
+            Expression.parse(spec.expression, list(study.parameters), f"derived.{name}")
+        except ConfigError as exc:
+            problems.append(exc.message)
     return problems
 
 

@@ -4,15 +4,15 @@
 :class:`MeasuredData`: the boundary conditions as a
 :class:`~bayescal.simulators.base.Forcing` on the study clock, the measured
 outputs to calibrate on, the clock and the list of gaps. Columns listed in
-``[outputs].calibrate`` are outputs; every other mapped column is a boundary
-condition.
+``[outputs].calibrate`` are outputs, those in ``[outputs].held_out`` held-out
+outputs; every other mapped column is a boundary condition.
 """
 
 from __future__ import annotations
 
 import dataclasses
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from datetime import UTC, timedelta, tzinfo
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -60,6 +60,9 @@ class MeasuredData:
         Warm-up, training periods and test window.
     source
         The data file.
+    held_out
+        Measured outputs that are predicted but never calibrated on
+        (``[outputs] held_out``), NaN where missing.
     zone
         The zone of the file's local times (messages show times in it).
     """
@@ -72,6 +75,7 @@ class MeasuredData:
     layout: PeriodLayout
     source: Path
     zone: tzinfo = UTC
+    held_out: Mapping[str, np.ndarray] = field(default_factory=dict)
 
     @property
     def n(self) -> int:
@@ -374,6 +378,15 @@ def load_measured(study: Study) -> MeasuredData:
         series={name: frame[name].to_numpy(dtype=float) for name in forcing_names},
         start=times[0],
     )
+    held_out = {name: frame[name].to_numpy(dtype=float) for name in study.outputs.held_out}
     return MeasuredData(
-        forcing, outputs, times, step.total_seconds(), tuple(gaps), layout, Path(source), zone
+        forcing,
+        outputs,
+        times,
+        step.total_seconds(),
+        tuple(gaps),
+        layout,
+        Path(source),
+        zone,
+        held_out,
     )

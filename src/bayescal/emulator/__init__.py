@@ -6,7 +6,10 @@
 * :mod:`~bayescal.emulator.kernel` -- the separable covariance of eq. 8.
 * :mod:`~bayescal.emulator.dense` -- dense Cholesky reference likelihoods.
 * :mod:`~bayescal.emulator.kron` -- fast Kronecker training likelihood (eqs. 5, 10).
-* :mod:`~bayescal.emulator.training` -- the hyperparameter posterior (eq. 9), MCMC and MAP.
+* :mod:`~bayescal.emulator.gradient` -- eq. 9 on the log scale with its exact gradient.
+* :mod:`~bayescal.emulator.mapfit` -- the MAP by multi-start L-BFGS-B, Laplace approximation.
+* :mod:`~bayescal.emulator.training` -- the hyperparameter posterior (eq. 9), training
+  (gradient MAP search by default, or the paper's MCMC).
 * :mod:`~bayescal.emulator.gp` -- the trained emulator: prediction, leave-one-run-out CV.
 
 The calibration likelihood (eqs. 12-16) is in :mod:`bayescal.calibration`.

@@ -9,10 +9,15 @@ the calibration need:
   order of :mod:`bayescal.emulator.kron`; ``Y*`` (``N x m*``) the measured
   periods. With several outputs each is standardised on its own and they are
   stacked along the within-period axis (``N = sum n_q``).
-* point-wise standardisation from the simulations only, applied to ``Y*`` too;
-* the GPMSA-scaled PCA basis ``K`` (``p`` by variance fraction or count), the
-  weights ``W`` (eq. 6) and ``W*`` (eq. 13), and the Gamma priors of
-  ``lambda`` (eq. 7) and ``lambda*`` (eq. 7 applied to ``Y*``);
+* standardisation from the simulations only (point-wise mean; point-wise or
+  one-per-output scale), applied to ``Y*`` too;
+* one GPMSA-scaled PCA basis per output, stacked block-diagonally into ``K``
+  (``p_q`` by variance fraction or count), the weights ``W`` (eq. 6) and
+  ``W*`` (eq. 13), and the Gamma prior of ``lambda`` (eq. 7);
+* every output's observation error model
+  (:class:`~bayescal.emulator.noise.ObservationModel`: white or AR(1) errors,
+  the prior of its precision ``lambda*`` from a stated sensor accuracy or a
+  weak default);
 * the variable conditions ``x`` from a PCA of every boundary-condition series
   over the periods, normalised to [0, 1], and ``theta`` normalised by the prior
   bounds;
@@ -36,16 +41,48 @@ from bayescal.emulator.basis import (
     Basis,
     InputPCA,
     Normaliser,
+    Scale,
     Standardisation,
+    block_basis,
     input_pca,
-    pca_basis,
     standardise,
 )
 from bayescal.emulator.kernel import FloatArray
+from bayescal.emulator.noise import (
+    DEFAULT_NOISE_PRIOR,
+    ErrorModel,
+    ObservationModel,
+    OutputNoise,
+    noise_prior_from_sd,
+)
 from bayescal.errors import ConfigError, DataError
+from bayescal.glossary import GLOSSARY
 from bayescal.periods import PeriodLayout
 
-__all__ = ["Assembled", "OutputStack", "assemble", "runs_to_columns"]
+__all__ = ["Assembled", "NoiseSpec", "OutputStack", "assemble", "runs_to_columns"]
+
+
+@dataclass(frozen=True)
+class NoiseSpec:
+    """What the study says about one output's measurement error.
+
+    Parameters
+    ----------
+    model
+        ``"white"`` (independent errors, the paper) or ``"ar1"`` (AR(1) within
+        a period, coefficient sampled).
+    sd
+        The sensor's accuracy as a standard deviation, or a range ``(low,
+        high)``, in the output's unit; ``None``: a weak default prior
+        (:data:`~bayescal.emulator.noise.DEFAULT_NOISE_PRIOR`). [unit]
+    discrepancy
+        Whether to add a model discrepancy over the periods' conditions
+        (:class:`~bayescal.emulator.noise.OutputNoise`).
+    """
+
+    model: ErrorModel = "white"
+    sd: float | tuple[float, float] | None = None
+    discrepancy: bool = False
 
 
 @dataclass(frozen=True)
@@ -146,12 +183,15 @@ class Assembled:
     lam_prior
         ``(shape, rate)`` of the Gamma prior of ``lambda`` after eq. 7.
     lam_star_prior
-        ``(shape, rate)`` of the Gamma prior of ``lambda*``, built like eq. 7 from ``Y*``.
+        ``(shape, rate)`` of the Gamma prior of the first output's ``lambda*``,
+        built like eq. 7 from ``Y*`` (for callers that know one white output).
     x_test
         Variable conditions of the periods covering the test window, ``(m_test, s)``
         (outside [0, 1] for conditions not seen in training). [-]
     y_star_test_std
         Standardised measured test periods, ``(N, m_test)``; NaN where missing. [-]
+    observations
+        The outputs' error models with the measured training periods.
     """
 
     parameter_names: tuple[str, ...]
@@ -171,6 +211,7 @@ class Assembled:
     lam_star_prior: tuple[float, float]
     x_test: FloatArray
     y_star_test_std: FloatArray
+    observations: ObservationModel
 
     @property
     def n_runs(self) -> int:
@@ -255,6 +296,8 @@ def assemble(
     history: int = 0,
     lam_shape: float = 5.0,
     lam_rate: float = 5.0,
+    scale: Scale = "pointwise",
+    noise: Mapping[str, NoiseSpec] | None = None,
 ) -> Assembled:
     """Cut, standardise and project simulations and measurements (method.md section 2).
 
@@ -289,7 +332,14 @@ def assemble(
         show. 0 is the paper's ``x``. Samples before the record start repeat
         the first value.
     lam_shape, lam_rate
-        Gamma prior of the precisions before the update of eq. 7. [-]
+        Gamma prior of the simulator precision ``lambda`` before the update of
+        eq. 7. [-]
+    scale
+        ``"pointwise"`` (the paper) or ``"output"`` (one scale per output, so a
+        sensor's noise has one size; :func:`bayescal.emulator.basis.standardise`).
+    noise
+        Output name -> its error model and sensor accuracy (default: white, weak
+        prior).
 
     Returns
     -------
@@ -303,9 +353,9 @@ def assemble(
     n_runs, n_total = design.runs, layout.n_total
     cuts = {n: layout.cut(_runs_array(runs, n, n_runs, n_total)) for n in names}
     sims = {n: runs_to_columns(c) for n, c in cuts.items()}
-    stack = OutputStack(names, tuple(standardise(sims[n]) for n in names))
+    stack = OutputStack(names, tuple(standardise(sims[n], scale) for n in names))
     y_std = stack.apply(sims)
-    basis = pca_basis(y_std, variance=variance, components=components)
+    basis = block_basis(y_std, stack.sizes, variance=variance, components=components)
     meas = {n: _series(measured, n, n_total, "measured output") for n in names}
     y_star_std = stack.apply({n: layout.cut(v) for n, v in meas.items()})
     _check_measured(y_star_std, names)
@@ -324,6 +374,7 @@ def assemble(
     priors = dict(design.priors)
     lower = [p.lower for p in priors.values()]
     upper = [p.upper for p in priors.values()]
+    observations = _observations(stack, basis, y_star_std, noise or {})
     return Assembled(
         parameter_names=design.names,
         priors=priors,
@@ -339,7 +390,33 @@ def assemble(
         w=basis.weights(y_std),
         w_star=basis.weights(y_star_std),
         lam_prior=basis.lambda_posterior(y_std, lam_shape, lam_rate),
-        lam_star_prior=basis.lambda_posterior(y_star_std, lam_shape, lam_rate),
+        lam_star_prior=observations.white_prior(0),
         x_test=x_test,
         y_star_test_std=y_test_std,
+        observations=observations,
     )
+
+
+def _observations(
+    stack: OutputStack, basis: Basis, y_star: FloatArray, noise: Mapping[str, NoiseSpec]
+) -> ObservationModel:
+    """Each output's error model: its rows, its bases, its prior in standardised units."""
+    unknown = sorted(set(noise) - set(stack.names))
+    if unknown:
+        raise ConfigError(f"noise given for {unknown}, which are not calibrated outputs")
+    outputs = []
+    for q, (name, sl) in enumerate(stack.slices.items()):
+        spec = noise.get(name, NoiseSpec())
+        st = stack.standardisations[q]
+        scale = float(np.sqrt(np.mean(st.sd * st.sd)))  # the one scale ("output") or its RMS
+        prior = (
+            DEFAULT_NOISE_PRIOR if spec.sd is None else noise_prior_from_sd(spec.sd, scale, name)
+        )
+        bases = tuple(j for j, g in enumerate(basis.groups) if g == q)
+        unit = GLOSSARY[name].unit if name in GLOSSARY else ""
+        outputs.append(
+            OutputNoise(
+                name, (sl.start, sl.stop), bases, spec.model, prior, scale, unit, spec.discrepancy
+            )
+        )
+    return ObservationModel(tuple(outputs), basis.k, y_star)

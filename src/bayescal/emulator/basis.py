@@ -7,8 +7,16 @@ other way round, one row per period (``m* x n``), as in :func:`input_pca`.
 
 Conventions
 -----------
-* Point-wise standardisation uses the population standard deviation
-  (``ddof = 0``) over the ``m`` simulated periods.
+* Outputs are centred point-wise (the mean over the ``m`` simulated periods of
+  each within-period sample) and scaled either point-wise (the paper: the
+  population standard deviation, ``ddof = 0``, of each sample) or by one
+  number per output (``scale="output"``: the root mean square of those
+  standard deviations). With one scale per output a sensor's white noise of
+  standard deviation ``sigma`` stays white in standardised units, with
+  standard deviation ``sigma / s`` at every time of day; point-wise scaling
+  turns it into noise whose size follows the design runs' spread.
+* Several outputs get one basis each (:func:`block_basis`): ``K`` is block
+  diagonal, so the weights of one output never carry another's noise.
 * The output basis is scaled as in GPMSA, ``K = U_p S_p / sqrt(m)`` from the
   thin SVD ``Y = U S V^T``, so that the simulator weights ``W_hat = sqrt(m) V_p``
   have mean 0 and (population) variance 1 for every basis.
@@ -19,7 +27,8 @@ Conventions
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from typing import Literal
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -30,6 +39,8 @@ from bayescal.errors import ConfigError, DataError
 
 #: Singular values below this fraction of the largest count as zero.
 RANK_TOL = 1e-12
+
+Scale = Literal["pointwise", "output"]
 
 
 def _finite_matrix(value: ArrayLike, name: str) -> FloatArray:
@@ -102,14 +113,19 @@ class Standardisation:
         return arr * self.sd[:, None] + self.mean[:, None]
 
 
-def standardise(y: ArrayLike) -> Standardisation:
-    """Point-wise mean and standard deviation over the simulated periods.
+def standardise(y: ArrayLike, scale: Scale = "pointwise") -> Standardisation:
+    """Point-wise mean, and the scale, over the simulated periods.
 
     Parameters
     ----------
     y
         Simulated output, ``n x m`` (column ``i`` is period ``i``), in the
         output's units.
+    scale
+        ``"pointwise"`` (each sample's standard deviation, the paper) or
+        ``"output"`` (one number: the root mean square of those, so that the
+        standardised output keeps its shape over the period and a sensor's
+        noise keeps one size; see the module docstring).
 
     Raises
     ------
@@ -120,8 +136,8 @@ def standardise(y: ArrayLike) -> Standardisation:
     arr = _finite_matrix(y, "Y")
     mean = arr.mean(axis=1)
     sd = arr.std(axis=1)
-    scale = np.maximum(np.abs(mean), np.max(np.abs(arr), axis=1))
-    constant = np.flatnonzero(sd <= RANK_TOL * np.maximum(scale, np.finfo(float).tiny))
+    magnitude = np.maximum(np.abs(mean), np.max(np.abs(arr), axis=1))
+    constant = np.flatnonzero(sd <= RANK_TOL * np.maximum(magnitude, np.finfo(float).tiny))
     if constant.size:
         raise DataError(
             f"within-period sample(s) {constant[:10].tolist()} of Y are the same in all "
@@ -129,6 +145,10 @@ def standardise(y: ArrayLike) -> Standardisation:
             hint="check that the design varies the parameters and that the output "
             "is not clamped; drop such samples or shorten the periods",
         )
+    if scale == "output":
+        return Standardisation(mean, np.full_like(sd, np.sqrt(np.mean(sd * sd))))
+    if scale != "pointwise":
+        raise ConfigError(f"scale must be 'pointwise' or 'output', got {scale!r}")
     return Standardisation(mean, sd)
 
 
@@ -168,11 +188,25 @@ class Basis:
         shape ``(min(n, m),)``, non-increasing; the first ``p`` are kept.
     n_periods
         ``m``, the number of simulated periods the basis was built from.
+    groups
+        Output of every basis vector ``(p,)`` (an index into the outputs in
+        stacking order); all 0 for one output. With several outputs each has
+        its own basis (:func:`block_basis`) and ``explained`` is that of the
+        first output.
     """
 
     k: FloatArray
     explained: FloatArray
     n_periods: int
+    groups: tuple[int, ...] = field(default=())
+
+    def __post_init__(self) -> None:
+        if not self.groups:
+            object.__setattr__(self, "groups", (0,) * int(self.k.shape[1]))
+        if len(self.groups) != self.k.shape[1]:
+            raise DataError(
+                f"basis has {self.k.shape[1]} vectors but {len(self.groups)} output indices"
+            )
 
     @property
     def p(self) -> int:
@@ -275,6 +309,48 @@ def pca_basis(y_std: ArrayLike, variance: float = 0.90, components: int | None =
     signs = _sign_fix(u[:, :p])
     k = u[:, :p] * (signs * s[:p] / np.sqrt(arr.shape[1]))
     return Basis(k=k, explained=explained, n_periods=arr.shape[1])
+
+
+def block_basis(
+    y_std: ArrayLike,
+    sizes: Sequence[int],
+    variance: float = 0.90,
+    components: int | None = None,
+) -> Basis:
+    """One GPMSA-scaled PCA basis per output, stacked block-diagonally.
+
+    Parameters
+    ----------
+    y_std
+        Standardised simulator output of all outputs stacked, ``(sum n_q, m)``.
+    sizes
+        Samples per period of each output ``n_q``, in stacking order.
+    variance, components
+        As :func:`pca_basis`, for each output.
+
+    Returns
+    -------
+    Basis
+        ``K`` ``(sum n_q, sum p_q)`` with output ``q``'s vectors nonzero only in
+        its rows; ``groups`` says which output each vector belongs to. With one
+        output this is :func:`pca_basis`.
+    """
+    arr = _finite_matrix(y_std, "Y_std")
+    if sum(sizes) != arr.shape[0]:
+        raise DataError(f"outputs of {list(sizes)} samples do not stack to {arr.shape[0]} rows")
+    if len(sizes) == 1:
+        return pca_basis(arr, variance, components)
+    bounds = np.concatenate([[0], np.cumsum(sizes)]).astype(int)
+    parts = [
+        pca_basis(arr[bounds[q] : bounds[q + 1]], variance, components) for q in range(len(sizes))
+    ]
+    k = np.zeros((arr.shape[0], sum(b.p for b in parts)))
+    col, groups = 0, []
+    for q, b in enumerate(parts):
+        k[bounds[q] : bounds[q + 1], col : col + b.p] = b.k
+        col += b.p
+        groups += [q] * b.p
+    return Basis(k=k, explained=parts[0].explained, n_periods=arr.shape[1], groups=tuple(groups))
 
 
 def _check_centred(arr: FloatArray) -> None:

@@ -76,6 +76,7 @@ def calibration_covariance(
     theta_star: FloatArray | None = None,
     obs_index: IntArray | None = None,
     a_star: ArrayLike = 0.0,
+    delta: float = 0.0,
 ) -> FloatArray:
     """Full covariance of eq. 14 (or of eq. 10 when ``theta_star`` is None).
 
@@ -96,6 +97,9 @@ def calibration_covariance(
     a_star
         Observation nugget ``(lambda* k_j^T k_j)^-1``, a scalar or one value per
         observed period (the difference process's ``B_j``). [-]
+    delta
+        Variance of a model discrepancy over the observed periods: adds
+        ``delta c_x(x_i, x_k)`` to the observed block. [-]
     """
     z = grid_inputs(theta, x)
     nugget = np.full(z.shape[0], float(a))
@@ -106,6 +110,9 @@ def calibration_covariance(
         nugget = np.concatenate([nugget, np.broadcast_to(a_star, idx.shape).astype(float)])
     cov = kernel.full(z)
     cov[np.diag_indices_from(cov)] += nugget
+    if theta_star is not None and delta:
+        obs = slice(theta.shape[0] * x.shape[0], None)
+        cov[obs, obs] += delta * kernel.x_corr(z[obs, theta.shape[1] :])
     return cov
 
 
@@ -119,6 +126,7 @@ def dense_logpdf(
     theta_star: FloatArray | None = None,
     obs_index: IntArray | None = None,
     a_star: ArrayLike = 0.0,
+    delta: float = 0.0,
 ) -> LogDensity:
     """``log N(v; 0, Omega)`` for one basis with the dense covariance.
 
@@ -126,7 +134,7 @@ def dense_logpdf(
     weights (run-major) and, with ``theta_star``, the observed weights.
     """
     cov = calibration_covariance(
-        theta, x, kernel, a, theta_star=theta_star, obs_index=obs_index, a_star=a_star
+        theta, x, kernel, a, theta_star=theta_star, obs_index=obs_index, a_star=a_star, delta=delta
     )
     vec = np.asarray(v, dtype=float)
     if vec.shape != (cov.shape[0],):

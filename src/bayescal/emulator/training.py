@@ -29,14 +29,25 @@ eigen-decomposition and ``O(R m*^2)``; a move of ``tau`` or ``lambda`` costs
 
 Training, MAP
 -------------
-:func:`train` runs adaptive Metropolis-within-Gibbs chains (proposal widths
-adapted during burn-in only, each coordinate sampled on the log scale) and
-takes as MAP the mode of the posterior density **of the sampled log-scale
-coordinates** ``(ln beta, ln tau, ln lambda)``: the best draw by that
-density, refined by a short L-BFGS-B search. That mode exists; the mode of the
-density of ``beta`` itself does not for inputs without influence (the
-``Beta(1, 0.1)`` prior diverges at ``rho = 1``). Both the best draw and the
-refined point are kept.
+The MAP is the mode of the posterior density **of the log-scale
+coordinates** ``(ln beta, ln tau, ln lambda)``. That mode exists; the mode of
+the density of ``beta`` itself does not for inputs without influence (the
+``Beta(1, 0.1)`` prior diverges at ``rho = 1``). :func:`train` finds it in one
+of two ways (``method``):
+
+``"map"`` (default)
+    Multi-start L-BFGS-B with the exact gradient
+    (:mod:`bayescal.emulator.mapfit`, :mod:`bayescal.emulator.gradient`); the
+    hyperparameters' uncertainty is the Laplace approximation at the MAP,
+    whose draws are kept in ``hyper_draws`` (one "chain" of independent
+    draws; ``hyper_lp`` and ``hyper_acceptance`` are NaN there: not
+    evaluated, nothing accepted). Its length is set by the optimiser's
+    convergence criteria and the multi-start rule, not by a number of sweeps.
+``"mcmc"``
+    The paper's route: adaptive Metropolis-within-Gibbs chains (proposal
+    widths adapted during burn-in only, each coordinate sampled on the log
+    scale), the best draw by the log-scale density, refined by a short
+    L-BFGS-B search. Both the best draw and the refined point are kept.
 
 The trained result is an :class:`~bayescal.emulator.gp.Emulator`.
 """
@@ -48,7 +59,7 @@ import os
 from collections.abc import Callable
 from dataclasses import dataclass
 from functools import partial
-from typing import Any
+from typing import Any, Literal, get_args
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -57,20 +68,26 @@ from scipy import optimize
 from bayescal.design import log_gamma
 from bayescal.emulator.assemble import Assembled
 from bayescal.emulator.gp import Emulator
+from bayescal.emulator.gradient import LogScalePosterior, squared_distances
 from bayescal.emulator.hyper import HyperLayout, HyperPriors, log_prior_beta
 from bayescal.emulator.kernel import LOG_2PI, FloatArray
 from bayescal.emulator.kron import Lru, SymEig
-from bayescal.errors import DataError
+from bayescal.emulator.mapfit import (
+    MapSettings,
+    default_processes,
+    find_map,
+    laplace_covariance,
+    laplace_draws,
+    laplace_hessian,
+)
+from bayescal.errors import ConfigError, DataError
 from bayescal.mcmc.chains import ChainBackend, Chains, run_chains
 from bayescal.mcmc.samplers.mwg import MetropolisWithinGibbs
 
-__all__ = ["TrainingPosterior", "train"]
+__all__ = ["TRAINING_METHODS", "TrainingMethod", "TrainingPosterior", "train"]
 
-
-def _squared_distances(a: FloatArray) -> FloatArray:
-    """``(d, N, N)``: ``(a_il - a_kl)^2`` for every column ``l``."""
-    diff = a.T[:, :, None] - a.T[:, None, :]
-    return diff * diff
+TrainingMethod = Literal["map", "mcmc"]
+TRAINING_METHODS: tuple[str, ...] = get_args(TrainingMethod)
 
 
 class TrainingPosterior:
@@ -116,8 +133,8 @@ class TrainingPosterior:
         self.ktk = np.asarray(ktk, dtype=float).reshape(self.p)
         self.lam_prior = (float(lam_prior[0]), float(lam_prior[1]))
         self.priors = HyperPriors() if priors is None else priors
-        self.d_theta = _squared_distances(self.theta)
-        self.d_x = _squared_distances(self.x)
+        self.d_theta = squared_distances(self.theta)
+        self.d_x = squared_distances(self.x)
         self._reset_caches()
 
     def _reset_caches(self) -> None:
@@ -248,9 +265,61 @@ def _map(
     return best, best_score, best, best_score
 
 
+@dataclass(frozen=True)
+class _Fit:
+    """What a training method hands to the :class:`Emulator` (see its attributes)."""
+
+    v_map: FloatArray
+    draws: FloatArray
+    lp: FloatArray
+    acceptance: FloatArray
+    best: FloatArray
+    best_score: float
+    map_score: float
+
+
+@dataclass(frozen=True)
+class _Progress:
+    """Reports a share of the work as the MCMC iteration count the caller expects."""
+
+    callback: Callable[[int], None] | None
+    total: int
+    parts: int
+
+    def __call__(self, done: int) -> None:
+        if self.callback is not None:
+            self.callback(min(self.total, round(self.total * done / self.parts)))
+
+
+def _fit_map(
+    target: LogScalePosterior,
+    n_draws: int,
+    seed: int,
+    processes: int,
+    settings: MapSettings | None,
+    progress: _Progress,
+) -> _Fit:
+    """``method="map"``: multi-start L-BFGS-B, then the Laplace approximation."""
+    layout = target.layout
+    found = find_map(target, seed=seed, settings=settings, processes=processes, callback=progress)
+    cov = laplace_covariance(laplace_hessian(target, found.u))
+    draws = laplace_draws(found.u, cov, n_draws, np.random.default_rng([seed, 3]))
+    progress(progress.parts)
+    return _Fit(
+        v_map=np.exp(found.u),
+        draws=draws[None, :, :],
+        lp=np.full((1, n_draws), np.nan),
+        acceptance=np.full((1, layout.d), np.nan),
+        best=np.exp(found.u_start),
+        best_score=found.value_start,
+        map_score=found.value,
+    )
+
+
 def train(
     assembled: Assembled,
     *,
+    method: TrainingMethod = "map",
     n_burn: int = 500,
     n_draws: int = 1000,
     n_chains: int = 2,
@@ -263,76 +332,100 @@ def train(
     callback: Callable[[int], None] | None = None,
     checkpoint_dir: str | os.PathLike[str] | None = None,
     checkpoint_seconds: float = 30.0,
+    map_settings: MapSettings | None = None,
 ) -> Emulator:
-    """Train the emulator: MwG chains over eq. 9, MAP, conditioned GP (method.md section 3).
+    """Train the emulator: the MAP of eq. 9 and the conditioned GP (method.md section 3).
 
     Parameters
     ----------
     assembled
         The assembled data (:func:`bayescal.emulator.assemble.assemble`).
+    method
+        ``"map"`` (multi-start L-BFGS-B with the exact gradient and a Laplace
+        approximation; default) or ``"mcmc"`` (the paper's Metropolis-within-Gibbs
+        chains, best draw refined); see the module docstring.
     n_burn
-        Burn-in sweeps per chain (proposal widths adapted, then frozen).
+        ``"mcmc"``: burn-in sweeps per chain (proposal widths adapted, then frozen).
     n_draws
-        Kept sweeps per chain.
+        ``"mcmc"``: kept sweeps per chain; ``"map"``: draws from the Laplace
+        approximation.
     n_chains
-        Number of chains (dispersed starts).
+        ``"mcmc"``: number of chains (dispersed starts).
     seed
-        Root seed of the chains (recorded in the emulator).
+        Root seed of the chains or of the random starts (recorded in the emulator).
     backend
-        ``"processes"`` (one worker per chain), ``"serial"`` or
-        ``"vectorised"`` (the chains in lockstep here; see
-        :func:`bayescal.mcmc.chains.run_chains`).
+        ``"processes"`` or ``"auto"`` (``"mcmc"``: one worker per chain;
+        ``"map"``: the bases searched in up to ``os.cpu_count()`` workers),
+        ``"serial"`` or ``"vectorised"`` (``"mcmc"``: the chains in lockstep
+        here, see :func:`bayescal.mcmc.chains.run_chains`; ``"map"``: as
+        ``"serial"``).
     priors
         Priors of ``tau`` and ``rho`` (default: the paper's).
     refine
-        Refine the best draw by L-BFGS-B on the log scale.
+        ``"mcmc"``: refine the best draw by L-BFGS-B on the log scale.
     max_iter
-        Iterations of the refinement.
+        ``"mcmc"``: iterations of the refinement.
     max_adapt
-        Cap of the per-batch change of a log proposal width during burn-in.
+        ``"mcmc"``: cap of the per-batch change of a log proposal width during burn-in.
     callback
-        Progress: called with the iterations completed over all chains.
+        Progress: called with the iterations completed over all chains
+        (``"map"``: the share of the search done, in the same units).
     checkpoint_dir
-        Folder for per-chain snapshots; a killed run resumes from them with
-        identical draws (see :func:`bayescal.mcmc.chains.run_chains`).
+        ``"mcmc"``: folder for per-chain snapshots; a killed run resumes from
+        them with identical draws (see :func:`bayescal.mcmc.chains.run_chains`).
     checkpoint_seconds
         Minimum wall time between two snapshots of a chain. [s]
+    map_settings
+        ``"map"``: settings of the search (:class:`~bayescal.emulator.mapfit.MapSettings`).
 
     Returns
     -------
     Emulator
     """
+    if method not in TRAINING_METHODS:
+        raise ConfigError(
+            f"training method must be one of {list(TRAINING_METHODS)}, got {method!r}"
+        )
     hp = HyperPriors() if priors is None else priors
-    target = TrainingPosterior(
-        assembled.theta, assembled.x, assembled.w, assembled.basis.ktk, assembled.lam_prior, hp
-    )
-    layout = target.layout
-    starts = _starts(layout, assembled.lam_prior, n_chains, np.random.default_rng([seed, 1]))
-    sampler = MetropolisWithinGibbs(
-        n_burn=n_burn,
-        lower=[0.0] * layout.d,
-        scales=_initial_scales(layout, assembled.lam_prior[0]).tolist(),
-        batch_size=25,
-        max_adapt=max_adapt,
-    )
-    labels = assembled.input_labels
-    chains = run_chains(
-        sampler,
-        target,
-        starts,
-        n_draws,
-        seed=seed,
-        names=layout.names(labels),
-        backend=backend,
-        callback=callback,
-        checkpoint_dir=checkpoint_dir,
-        checkpoint_seconds=checkpoint_seconds,
-    )
-    best, best_score, v_map, map_score = _map(target, chains, refine, max_iter)
-    beta, tau, lam = layout.unpack(v_map)
+    args = (assembled.theta, assembled.x, assembled.w, assembled.basis.ktk, assembled.lam_prior)
+    if method == "map":
+        p = assembled.basis.p
+        progress = _Progress(callback, n_chains * (n_burn + n_draws), p + 2)
+        processes = default_processes(p) if backend in ("processes", "auto") else 1
+        fit = _fit_map(
+            LogScalePosterior(*args, hp), n_draws, seed, processes, map_settings, progress
+        )
+    else:
+        target = TrainingPosterior(*args, hp)
+        layout = target.layout
+        starts = _starts(layout, assembled.lam_prior, n_chains, np.random.default_rng([seed, 1]))
+        sampler = MetropolisWithinGibbs(
+            n_burn=n_burn,
+            lower=[0.0] * layout.d,
+            scales=_initial_scales(layout, assembled.lam_prior[0]).tolist(),
+            batch_size=25,
+            max_adapt=max_adapt,
+        )
+        chains = run_chains(
+            sampler,
+            target,
+            starts,
+            n_draws,
+            seed=seed,
+            names=layout.names(assembled.input_labels),
+            backend=backend,
+            callback=callback,
+            checkpoint_dir=checkpoint_dir,
+            checkpoint_seconds=checkpoint_seconds,
+        )
+        best, best_score, v_map, map_score = _map(target, chains, refine, max_iter)
+        fit = _Fit(
+            v_map, chains.draws, chains.log_density, chains.acceptance, best, best_score, map_score
+        )
+    beta, tau, lam = HyperLayout(assembled.basis.p, len(assembled.input_labels)).unpack(fit.v_map)
     return Emulator(
         parameter_names=assembled.parameter_names,
-        input_labels=tuple(labels),
+        input_labels=tuple(assembled.input_labels),
         theta_normaliser=assembled.theta_normaliser,
         outputs=assembled.outputs,
         basis=assembled.basis,
@@ -345,12 +438,12 @@ def train(
         tau=tau,
         lam=lam,
         lam_prior=assembled.lam_prior,
-        hyper_draws=chains.draws,
-        hyper_lp=chains.log_density,
-        hyper_acceptance=chains.acceptance,
-        best_draw=best,
-        log_post_best=best_score,
-        log_post_map=map_score,
+        hyper_draws=fit.draws,
+        hyper_lp=fit.lp,
+        hyper_acceptance=fit.acceptance,
+        best_draw=fit.best,
+        log_post_best=fit.best_score,
+        log_post_map=fit.map_score,
         seed=int(seed),
         hyper_priors=hp,
     )

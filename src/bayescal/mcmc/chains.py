@@ -13,6 +13,17 @@ this process in lockstep, one batched log-density call per coordinate update
 generator as the serial sampler does, so its draws equal the serial ones
 (bit for bit when the batched log-density equals the scalar one row by row).
 Its checkpoint is one snapshot of all chains (``lockstep.npz``).
+
+Backend ``"vectorised-processes"`` splits the chains into one lockstep group
+per worker process (each group at least 2 chains, its own snapshot
+``lockstep-<g>.npz``): both the batching and the cores. Draws are those of
+the other backends (each chain keeps its generator).
+
+Backend ``"auto"`` picks one for the target at hand (:func:`choose_backend`):
+lockstep where the target says its batched form is worth it
+(``lockstep_preferred(n_chains, workers)``; the calibration posterior of
+eq. 16 does where its batched likelihood exists), in groups over the workers
+where there are several; else worker processes, or one chain here.
 """
 
 from __future__ import annotations
@@ -38,7 +49,7 @@ from bayescal.mcmc.samplers.mwg import MetropolisWithinGibbs
 StartFunction = Callable[[np.random.Generator], ArrayLike]
 """Draws a starting point (d,) with the chain's own generator."""
 
-ChainBackend = Literal["processes", "serial", "vectorised"]
+ChainBackend = Literal["processes", "serial", "vectorised", "vectorised-processes", "auto"]
 BACKENDS: tuple[str, ...] = get_args(ChainBackend)
 
 
@@ -173,7 +184,9 @@ def run_chains(
         ``"vectorised"`` (all chains in lockstep here, batched log-density
         calls; Metropolis-within-Gibbs only); the log-density's batched form is
         chosen by :func:`~bayescal.mcmc.samplers.lockstep.as_lockstep` (the
-        calibration posterior offers the batched Kronecker likelihood).
+        calibration posterior offers the batched Kronecker likelihood);
+        ``"vectorised-processes"`` (lockstep groups of at least 2 chains, one
+        per worker process); ``"auto"``: one of these by :func:`choose_backend`.
     max_workers
         Worker processes; default ``min(n_chains, os.cpu_count())``.
     callback
@@ -182,7 +195,8 @@ def run_chains(
         processes the count arrives in steps of about 1 % per chain.
     checkpoint_dir
         Folder for one snapshot per chain (``chain-<k>.npz``; one
-        ``lockstep.npz`` for all chains with ``"vectorised"``), written between
+        ``lockstep.npz`` for all chains with ``"vectorised"``, one
+        ``lockstep-<g>.npz`` per group with ``"vectorised-processes"``), written between
         batches at most every ``checkpoint_seconds``; matching snapshots found
         there are resumed, so a killed run continues with identical draws. The
         sampler must accept ``checkpoint=`` (Metropolis-within-Gibbs does).
@@ -196,8 +210,24 @@ def run_chains(
     mode = _backend(backend, sampler)
     start_list = _start_list(starts, n_chains)
     n_chains = len(start_list)
+    if mode == "auto":
+        mode = choose_backend(sampler, log_density, n_chains, max_workers)
     children = np.random.SeedSequence(seed).spawn(n_chains)
-    if mode == "vectorised":
+    groups = lockstep_groups(n_chains, max_workers) if mode == "vectorised-processes" else 1
+    if groups > 1:
+        _check_picklable(log_density, sampler, starts)
+        results = _run_groups(
+            sampler,
+            log_density,
+            start_list,
+            n_draws,
+            children,
+            groups,
+            callback,
+            None if checkpoint_dir is None else (Path(checkpoint_dir), checkpoint_seconds),
+        )
+        return _named(results, names, seed)
+    if mode in ("vectorised", "vectorised-processes"):
         snapshot = None
         if checkpoint_dir is not None:
             snapshot = ChainCheckpoint(Path(checkpoint_dir) / "lockstep.npz", checkpoint_seconds)
@@ -237,12 +267,52 @@ def _named(results: Sequence[SamplerResult], names: Sequence[str] | None, seed: 
     return Chains(tuple(results), chain_names, int(seed))
 
 
+def choose_backend(
+    sampler: Sampler, log_density: Any, n_chains: int, max_workers: int | None = None
+) -> str:
+    """The backend ``"auto"`` runs: ``"vectorised"``, ``"processes"`` or ``"serial"``.
+
+    Lockstep when the sampler is Metropolis-within-Gibbs and the target's
+    ``lockstep_preferred(n_chains, workers)`` (if it has one) says its batched
+    form is faster than ``workers`` processes; one chain runs here
+    (``"serial"``); otherwise worker processes.
+
+    Parameters
+    ----------
+    sampler
+        The sampler.
+    log_density
+        The target.
+    n_chains
+        Number of chains.
+    max_workers
+        Worker processes the ``"processes"`` backend would use; default
+        ``min(n_chains, os.cpu_count())``.
+    """
+    if n_chains <= 1:
+        return "serial"
+    workers = max_workers if max_workers is not None else min(n_chains, os.cpu_count() or 1)
+    advice = getattr(log_density, "lockstep_preferred", None)
+    if not (isinstance(sampler, MetropolisWithinGibbs) and callable(advice)):
+        return "processes"
+    if not advice(n_chains, max(1, min(workers, n_chains))):
+        return "processes"
+    return "vectorised-processes" if lockstep_groups(n_chains, workers) > 1 else "vectorised"
+
+
+def lockstep_groups(n_chains: int, max_workers: int | None = None) -> int:
+    """Lockstep groups of ``"vectorised-processes"``: one per worker, each >= 2 chains."""
+    workers = max_workers if max_workers is not None else min(n_chains, os.cpu_count() or 1)
+    return max(1, min(workers, n_chains // 2))
+
+
 def _backend(backend: str, sampler: Sampler) -> str:
     if backend not in BACKENDS:
         raise ConfigError(f"chain backend must be one of {list(BACKENDS)}, got {backend!r}")
-    if backend == "vectorised" and not isinstance(sampler, MetropolisWithinGibbs):
+    lockstep = backend in ("vectorised", "vectorised-processes")
+    if lockstep and not isinstance(sampler, MetropolisWithinGibbs):
         raise ConfigError(
-            f"backend 'vectorised' needs a MetropolisWithinGibbs sampler, "
+            f"backend {backend!r} needs a MetropolisWithinGibbs sampler, "
             f"got {type(sampler).__name__}",
             hint="use backend 'serial' or 'processes' for this sampler",
         )
@@ -268,6 +338,67 @@ def _run_vectorised(
         ]
     )
     return run_lockstep(sampler, as_lockstep(log_density), x0, n_draws, rngs, callback, checkpoint)
+
+
+@dataclass(frozen=True)
+class _Group:
+    """One lockstep group of ``"vectorised-processes"``, run in a worker process."""
+
+    sampler: Sampler
+    log_density: LogDensity
+    n_draws: int
+    snapshots: tuple[Path, float] | None
+
+    def __call__(
+        self,
+        index: int,
+        starts: list[Any],
+        children: list[np.random.SeedSequence],
+        callback: Callback | None,
+    ) -> list[SamplerResult]:
+        snapshot = None
+        if self.snapshots is not None:
+            folder, seconds = self.snapshots
+            snapshot = ChainCheckpoint(folder / f"lockstep-{index}.npz", seconds)
+        return _run_vectorised(
+            self.sampler, self.log_density, starts, self.n_draws, children, callback, snapshot
+        )
+
+
+def _run_groups(
+    sampler: Sampler,
+    log_density: LogDensity,
+    starts: list[Any],
+    n_draws: int,
+    children: list[np.random.SeedSequence],
+    n_groups: int,
+    callback: Callback | None,
+    snapshots: tuple[Path, float] | None,
+) -> list[SamplerResult]:
+    """The chains in ``n_groups`` contiguous lockstep groups, one per worker process."""
+    members = [g.tolist() for g in np.array_split(np.arange(len(starts)), n_groups)]
+    group = _Group(sampler, log_density, n_draws, snapshots)
+    total = _iterations(sampler, n_draws)
+    with ProcessPoolExecutor(max_workers=n_groups) as pool:
+
+        def submit(g: int, report: Callback | None) -> Future[list[SamplerResult]]:
+            chains = members[g]
+            return pool.submit(
+                group, g, [starts[k] for k in chains], [children[k] for k in chains], report
+            )
+
+        if callback is None:
+            futures = [submit(g, None) for g in range(n_groups)]
+        else:
+            with Manager() as manager:
+                queue = manager.Queue()
+                futures = []
+                for g, chains in enumerate(members):
+                    size = len(chains) * total
+                    reporter = _QueueReporter(queue, g, max(1, size // 100), size)
+                    futures.append(submit(g, reporter))
+                _relay_progress(futures, queue, callback, n_groups)
+        return [result for f in futures for result in f.result()]
 
 
 def _start_list(starts: ArrayLike | StartFunction, n_chains: int | None) -> list[Any]:
@@ -395,9 +526,7 @@ def _run_parallel(
             return [f.result() for f in futures]
 
 
-def _relay_progress(
-    futures: list[Future[SamplerResult]], queue: Any, callback: Callback, n: int
-) -> None:
+def _relay_progress(futures: list[Future[Any]], queue: Any, callback: Callback, n: int) -> None:
     """Call ``callback`` with the summed progress until every future is done."""
     progress = [0] * n
     pending = set(futures)

@@ -59,6 +59,13 @@ def _measured_key(ctx: Context) -> str:
     return digest(forcing_fingerprint(m.forcing), dict(m.outputs), layout, m.times)
 
 
+def _held_out_key(ctx: Context) -> str:
+    """The held-out sensors: names, stated accuracies and measured series."""
+    outputs = ctx.study.outputs
+    errors = {n: outputs.errors[n].model_dump(mode="json") for n in outputs.held_out}
+    return digest(list(outputs.held_out), errors, dict(ctx.measured.held_out))
+
+
 def stage_keys(ctx: Context) -> dict[str, str]:
     """The key of every stage for the study as it is now."""
     s = ctx.study
@@ -74,15 +81,25 @@ def stage_keys(ctx: Context) -> dict[str, str]:
         dump["runner"]["timeout"],
     )
     keys["emulator"] = digest(
-        "emulator", keys["simulate"], _measured_key(ctx), dump["outputs"], dump["emulator"]
+        "emulator",
+        keys["simulate"],
+        _measured_key(ctx),
+        s.outputs.calibration_dump(),
+        dump["emulator"],
     )
-    keys["calibrate"] = digest("calibrate", keys["emulator"], dump["calibration"])
+    keys["calibrate"] = digest(
+        "calibrate",
+        keys["emulator"],
+        dump["calibration"],
+        *([dump["derived"]] if s.derived else []),
+    )
     keys["discrepancy"] = digest("discrepancy", keys["calibrate"], dump["discrepancy"])
     keys["predict"] = digest(
         "predict",
         keys["discrepancy"],
         dump["predict"],
         {n: p.nominal for n, p in s.parameters.items()},
+        *([_held_out_key(ctx)] if s.outputs.held_out else []),
     )
     keys["report"] = digest("report", keys["predict"], s.study.name, s.study.description)
     return keys

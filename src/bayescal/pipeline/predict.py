@@ -1,24 +1,29 @@
 """Calibrated predictions with bands, and fit metrics on the training and test windows.
 
-Predictions come from the emulator at posterior draws of theta* (thinned evenly
-over all chains). For draw ``s`` and period ``i`` the emulator gives a mean
-``mu_s`` and a variance ``v_s`` (interpolation uncertainty of the weights plus
-the out-of-basis variance ``1/lambda``); the observation noise adds
-``sd^2 / lambda*_s`` (``sd`` the point-wise standardisation). One realisation
-``mu_s + sqrt(v_s + sd^2/lambda*_s) z`` per draw and sample gives the
-predictive distribution of a measurement; the band is its central ``level``
-interval and the prediction line the mean of ``mu_s``. With a discrepancy, the
-corrected prediction adds ``Delta(x)`` (its GP mean and variance) and uses the
-theta* draws of the discrepancy phase.
+**What a band includes.** For every sample the predictive distribution of a
+*measurement* is the mixture over ``S`` posterior draws of Gaussians
+(:mod:`bayescal.calibration.predictive`): for draw ``s`` the model's prediction at
+theta*_s (the emulator's mean, or the simulator re-run at theta*_s), the
+emulator's own interpolation variance (emulator predictions only; it includes
+the out-of-basis variance ``1/lambda``), the observation noise of the draw
+(``sd^2 / lambda*_s`` with ``sd`` the output's standardisation scale: with
+"output" standardisation this is the noise SD in the output's unit squared), and,
+for the corrected prediction, the difference process ``Delta(x)`` (its GP mean
+and variance) with theta* from the discrepancy phase. So the band of a
+measurement holds parameter uncertainty + emulator uncertainty + noise (+ Delta).
+The prediction line is the mixture's mean.
+
+The 95 % and 50 % bands (``[predict] level`` sets the outer one) are the
+mixture's central quantiles, computed exactly by bisection on its CDF, not from
+random realisations; their Monte Carlo error (from the finite ``S``) is
+estimated and reported as a fraction of the band's width (``mc_error``). The
+probability integral transform ``PIT = F(y_measured)`` of every measured sample
+is stored for the report's PIT histogram (uniform when the bands mean what they
+say).
 
 With ``[predict] method = "simulator"`` the simulator itself is re-run at
-``runs`` posterior draws instead (:func:`simulator_band`): the prediction is
-the mean of those runs and the band adds the same observation noise (and
-Delta). This avoids the emulator's extrapolation where the test periods' conditions
-``x`` lie outside those of the training periods. The corrected prediction
-(model + Delta) always uses the emulator: Delta is estimated as the
-observation minus the emulator's prediction of the model, so it also absorbs
-the emulator's own error and must be added to that prediction.
+``runs`` posterior draws (:func:`simulator_band`): no emulator extrapolation
+where the test periods' conditions lie outside the training ones.
 
 Samples of the training periods get the training predictions; samples of the
 test window get the predictions of the periods covering it. Everything else
@@ -26,16 +31,17 @@ test window get the predictions of the periods covering it. Everything else
 
 Metrics (see :mod:`bayescal.metrics`) are computed on the samples of the
 training periods (``window = "train"``) and of the test window (``"test"``)
-where the measurement is finite; ``coverage95`` is the fraction of measured
-samples inside the band. ``guideline14`` says whether the ASHRAE Guideline 14
-criteria for hourly data hold (CV(RMSE) <= 30 %, |NMBE| <= 10 %); they were
-written for whole-building energy use and are shown for orientation only.
+where the measurement is finite; ``coverage95`` and ``coverage50`` are the
+fractions of measured samples inside the 95 % and 50 % bands. ``guideline14``
+says whether the ASHRAE Guideline 14 criteria for hourly data hold (CV(RMSE) <=
+30 %, |NMBE| <= 10 %); they were written for whole-building energy use and are
+shown for orientation only.
 """
 
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any, Protocol
 
 import numpy as np
@@ -43,6 +49,8 @@ import pandas as pd
 import xarray as xr
 
 from bayescal.calibration.posterior import Posterior
+from bayescal.calibration.predictive import mixture_quantiles, quantile_error
+from bayescal.calibration.predictive import pit as predictive_pit
 from bayescal.emulator.assemble import Assembled
 from bayescal.emulator.gp import Emulator
 from bayescal.glossary import GLOSSARY
@@ -77,30 +85,79 @@ class DiscrepancyModel(Protocol):
 
 @dataclass(frozen=True)
 class Band:
-    """A prediction over the record: output name -> series ``(n_total,)``."""
+    """A prediction over the record: output name -> series ``(n_total,)``.
+
+    ``lower``/``upper`` bound the outer band (``level``, 95 % by default),
+    ``lower50``/``upper50`` the 50 % band; ``pit`` is ``F(y_measured)`` (NaN
+    where not measured or not predicted); ``mc_error`` the median Monte Carlo
+    standard error of the outer band's edges as a fraction of its width.
+    """
 
     mean: dict[str, np.ndarray]
     lower: dict[str, np.ndarray]
     upper: dict[str, np.ndarray]
+    lower50: dict[str, np.ndarray] = field(default_factory=dict)
+    upper50: dict[str, np.ndarray] = field(default_factory=dict)
+    pit: dict[str, np.ndarray] = field(default_factory=dict)
+    mc_error: dict[str, float] = field(default_factory=dict)
+    level: float = 0.95
 
 
-def _thin(posterior: Posterior, n: int) -> tuple[np.ndarray, np.ndarray]:
-    """``n`` draws spread evenly over all chains: theta* ``(n, t)`` and lambda* ``(n,)``."""
+def _mixture_band(
+    means: Mapping[str, np.ndarray],
+    variances: Mapping[str, np.ndarray],
+    measured: Mapping[str, np.ndarray],
+    level: float,
+) -> Band:
+    """The band of the mixtures ``(S, n_total)`` per output (NaN where not predicted)."""
+    tail = 0.5 * (1.0 - level)
+    band = Band({}, {}, {}, level=level)
+    for name, mean in means.items():
+        var = variances[name]
+        ok = np.all(np.isfinite(mean), axis=0) & np.all(np.isfinite(var), axis=0)
+        series = {k: np.full(mean.shape[1], np.nan) for k in ("m", "lo", "hi", "lo50", "hi50")}
+        pit = np.full(mean.shape[1], np.nan)
+        error = float("nan")
+        if ok.any():
+            mu, v = mean[:, ok], var[:, ok]
+            q = mixture_quantiles(mu, v, [tail, 0.25, 0.75, 1.0 - tail])
+            series["m"][ok] = mu.mean(axis=0)
+            for k, row in zip(("lo", "lo50", "hi50", "hi"), q, strict=True):
+                series[k][ok] = row
+            width = np.maximum(q[3] - q[0], np.finfo(float).tiny)
+            edge = np.maximum(quantile_error(mu, v, q[0]), quantile_error(mu, v, q[3]))
+            error = float(np.median(edge / width))
+            obs = np.asarray(measured[name], dtype=float) if name in measured else None
+            if obs is not None:
+                pit[ok] = predictive_pit(mu, v, obs[ok])
+        band.mean[name], band.lower[name], band.upper[name] = (
+            series["m"],
+            series["lo"],
+            series["hi"],
+        )
+        band.lower50[name], band.upper50[name] = series["lo50"], series["hi50"]
+        band.pit[name] = pit
+        band.mc_error[name] = error
+    return band
+
+
+def _thin(posterior: Posterior, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``n`` draws spread evenly over all chains: theta* ``(n, t)``, lambda* ``(n, O)``
+    and the draws' indices in the flattened draws."""
     theta = posterior.draws.reshape(-1, len(posterior.names))
-    lam_star = posterior.lam_star.reshape(-1)
+    lam_stars = posterior.lam_stars.reshape(theta.shape[0], -1)
     pick = np.unique(np.linspace(0, theta.shape[0] - 1, min(n, theta.shape[0])).astype(int))
-    return theta[pick], lam_star[pick]
+    return theta[pick], lam_stars[pick], pick
 
 
 def _period_moments(
     emulator: Emulator,
     theta: np.ndarray,
-    lam_star: np.ndarray,
+    lam_stars: np.ndarray,
     x: np.ndarray,
-    rng: np.random.Generator,
     discrepancy: DiscrepancyModel | None,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Mean ``(N, P)`` and realisations ``(S, N, P)`` of measurements at ``P`` periods."""
+    """Means and variances ``(S, N, P)`` of a measurement at ``P`` periods, per draw."""
     s, p = theta.shape[0], x.shape[0]
     th = np.repeat(theta, p, axis=0)
     xx = np.tile(x, (s, 1))
@@ -113,23 +170,24 @@ def _period_moments(
     mean = mean.reshape(n, s, p).transpose(1, 0, 2)
     var = var.reshape(n, s, p).transpose(1, 0, 2)
     sd = emulator.outputs.sd
-    var = var + (sd * sd)[None, :, None] / lam_star[:, None, None]
+    for q, sl in enumerate(emulator.outputs.slices.values()):
+        var[:, sl] += (sd[sl] * sd[sl])[None, :, None] / lam_stars[:, q, None, None]
     if discrepancy is not None:
         d_mean, d_var = discrepancy.predict(x)
         mean = mean + d_mean[None]
         var = var + d_var[None]
-    real = mean + np.sqrt(var) * rng.standard_normal(mean.shape)
-    return mean.mean(axis=0), real
+    return mean, var
 
 
 def _place(
     layout: PeriodLayout, starts: np.ndarray, values: np.ndarray, out: np.ndarray, begin: int
 ) -> None:
-    """Write period columns ``values`` ``(n, P)`` into ``out`` at samples >= ``begin``."""
+    """Write period columns ``values`` ``(..., n, P)`` into ``out`` ``(..., n_total)`` at
+    samples >= ``begin``."""
     for i, start in enumerate(starts):
         idx = start + np.arange(layout.period)
         keep = idx >= begin
-        out[idx[keep]] = values[keep, i]
+        out[..., idx[keep]] = values[..., keep, i]
 
 
 def predict_band(
@@ -139,10 +197,10 @@ def predict_band(
     *,
     draws: int = 300,
     level: float = 0.95,
-    seed: int = 0,
     discrepancy: DiscrepancyModel | None = None,
+    measured: Mapping[str, np.ndarray] | None = None,
 ) -> Band:
-    """Calibrated prediction of every output over the record, with a band.
+    """Calibrated prediction of every output over the record, with its bands.
 
     Parameters
     ----------
@@ -153,36 +211,39 @@ def predict_band(
     draws
         Posterior draws propagated (thinned evenly over the chains).
     level
-        Probability of the band. [-]
-    seed
-        Seed of the realisations that give the band.
+        Probability of the outer band. [-]
     discrepancy
         A fitted difference process to add (``None``: the model alone).
+    measured
+        Output name -> measured series ``(n_total,)`` for the PIT (optional).
 
     Returns
     -------
     Band
         NaN outside the training periods and the test window.
     """
-    rng = np.random.default_rng([seed, 7])
-    theta, lam_star = _thin(posterior, draws)
+    theta, lam_stars, pick = _thin(posterior, draws)
+    model_error = {
+        o: v[pick] for o, v in likelihood_delta_variance(emulator, assembled, posterior).items()
+    }
     layout = assembled.layout
     parts = [(assembled.x, layout.train_starts, 0)]
     if layout.test_starts.size:
         parts.append((assembled.x_test, layout.test_starts, layout.test_begin))
-    tail = 50.0 * (1.0 - level)
     slices = emulator.outputs.slices
-    out = {k: {n: np.full(layout.n_total, np.nan) for n in slices} for k in ("m", "lo", "hi")}
+    s = theta.shape[0]
+    means = {n: np.full((s, layout.n_total), np.nan) for n in slices}
+    variances = {n: np.full((s, layout.n_total), np.nan) for n in slices}
     for x, starts, begin in parts:
         if not len(starts):
             continue
-        mean, real = _period_moments(emulator, theta, lam_star, x, rng, discrepancy)
-        lo, hi = np.percentile(real, [tail, 100.0 - tail], axis=0)
+        mean, var = _period_moments(emulator, theta, lam_stars, x, discrepancy)
         for name, sl in slices.items():
-            _place(layout, starts, mean[sl], out["m"][name], begin)
-            _place(layout, starts, lo[sl], out["lo"][name], begin)
-            _place(layout, starts, hi[sl], out["hi"][name], begin)
-    return Band(out["m"], out["lo"], out["hi"])
+            _place(layout, starts, mean[:, sl], means[name], begin)
+            _place(layout, starts, var[:, sl], variances[name], begin)
+    for name, extra in model_error.items():
+        variances[name] = variances[name] + extra
+    return _mixture_band(means, variances, measured or {}, level)
 
 
 def _phase_sd(assembled: Assembled, name: str) -> np.ndarray:
@@ -194,16 +255,62 @@ def _phase_sd(assembled: Assembled, name: str) -> np.ndarray:
     return np.asarray(sd[(np.arange(layout.n_total) - anchor) % layout.period])
 
 
+def likelihood_delta_variance(
+    emulator: Emulator, assembled: Assembled, posterior: Posterior
+) -> dict[str, np.ndarray]:
+    """Variance of the in-likelihood discrepancy per draw and sample, in physical units.
+
+    An output declared with ``[outputs.errors.NAME] discrepancy = true`` carries
+    a discrepancy ``GP(0, r tau_j^-1 c_x)`` on each of its basis weights
+    (:class:`~bayescal.emulator.noise.OutputNoise`). A measurement of a new
+    period then differs from the model by ``K delta`` besides the noise, whose
+    variance at sample ``i`` is ``s_i^2 sum_j K_ij^2 r / tau_j`` (``s_i`` the
+    output's standardisation SD). The discrepancy's prior variance is used (it
+    is not conditioned on the training residuals): the band is wider, never
+    narrower, than the conditioned one.
+
+    Returns
+    -------
+    dict
+        Output name -> ``(S, n_total)`` for the posterior's ``S`` draws (flattened
+        over chains), only for outputs with such a discrepancy; empty for draws
+        without its ``r`` (those of the difference-process phase).
+    """
+    obs = assembled.observations
+    names = obs.names()
+    rel_names = names[len(names) - len(obs.delta_outputs) :]
+    if not obs.delta_outputs or not set(rel_names) <= set(posterior.aux_names):
+        # none, or draws without them (the difference-process phase, whose own
+        # Delta takes the discrepancy's place in the corrected prediction)
+        return {}
+    aux = np.asarray(posterior.aux, dtype=float).reshape(-1, len(posterior.aux_names))
+    variances = np.array([k.variance for k in emulator.kernels])
+    k = np.asarray(emulator.basis.k, dtype=float)
+    layout = assembled.layout
+    anchor = int(layout.test_starts[0]) if layout.test_starts.size else int(layout.train_starts[0])
+    phase = (np.arange(layout.n_total) - anchor) % layout.period
+    out = {}
+    for q, rel_name in zip(obs.delta_outputs, rel_names, strict=True):
+        name = obs.outputs[q].name
+        bases = list(obs.outputs[q].bases)
+        sl = assembled.outputs.slices[name]
+        per_row = (k[sl][:, bases] ** 2) @ variances[bases] * assembled.outputs.sd[sl] ** 2
+        r = aux[:, posterior.aux_names.index(rel_name)]
+        out[name] = r[:, None] * per_row[phase][None, :]
+    return out
+
+
 def simulator_band(
     assembled: Assembled,
     runs: Mapping[str, np.ndarray],
-    lam_star: np.ndarray,
+    lam_stars: np.ndarray,
     *,
     level: float = 0.95,
-    seed: int = 0,
     discrepancy: DiscrepancyModel | None = None,
+    measured: Mapping[str, np.ndarray] | None = None,
+    model_error: Mapping[str, np.ndarray] | None = None,
 ) -> Band:
-    """Calibrated prediction from simulator runs at posterior draws, with a band.
+    """Calibrated prediction from simulator runs at posterior draws, with its bands.
 
     Parameters
     ----------
@@ -211,23 +318,25 @@ def simulator_band(
         The assembled data (layout, standardisation; ``x`` for a discrepancy).
     runs
         Output name -> simulated series at ``S`` posterior draws ``(S, n_total)``.
-    lam_star
-        lambda* of the same draws ``(S,)``; the noise variance is ``sd^2 / lambda*``.
+    lam_stars
+        lambda* of the same draws, ``(S,)`` or ``(S, O)`` (one per output); the
+        noise variance is ``sd^2 / lambda*``.
     level
-        Probability of the band. [-]
-    seed
-        Seed of the noise realisations.
+        Probability of the outer band. [-]
     discrepancy
         A fitted difference process to add (its mean and variance).
+    measured
+        Output name -> measured series ``(n_total,)`` for the PIT (optional).
+    model_error
+        Output name -> variance ``(S, n_total)`` of an in-likelihood discrepancy
+        at the same draws (:func:`likelihood_delta_variance`), added to the noise.
 
     Returns
     -------
     Band
         NaN outside the training periods and the test window.
     """
-    rng = np.random.default_rng([seed, 11])
     layout = assembled.layout
-    tail = 50.0 * (1.0 - level)
     covered = np.zeros(layout.n_total, dtype=bool)
     for start in layout.train_starts:
         covered[start : start + layout.period] = True
@@ -237,18 +346,70 @@ def simulator_band(
         names = list(assembled.outputs.names)
         delta_mean = delta_series(assembled, discrepancy, names)
         delta_var = delta_series(assembled, discrepancy, names, variance=True)
-    band = Band({}, {}, {})
+    lam = np.asarray(lam_stars, dtype=float)
+    lam = lam[:, None] if lam.ndim == 1 else lam
+    order = list(assembled.outputs.names)
+    means, variances = {}, {}
     for name, sims in runs.items():
-        var = _phase_sd(assembled, name) ** 2 / np.asarray(lam_star)[:, None]
+        column = lam[:, order.index(name) if lam.shape[1] > 1 else 0]
+        var = _phase_sd(assembled, name) ** 2 / column[:, None]
         mean = np.asarray(sims, dtype=float)
+        if model_error and name in model_error:
+            var = var + model_error[name]
         if delta_mean is not None and delta_var is not None:
             mean = mean + delta_mean[name][None]
             var = var + delta_var[name][None]
-        real = mean + np.sqrt(var) * rng.standard_normal(mean.shape)
-        lo, hi = np.percentile(real, [tail, 100.0 - tail], axis=0)
-        for target, values in ((band.mean, mean.mean(axis=0)), (band.lower, lo), (band.upper, hi)):
-            target[name] = np.where(covered, values, np.nan)
-    return band
+        means[name] = np.where(covered, mean, np.nan)
+        variances[name] = np.where(covered, var, np.nan)
+    return _mixture_band(means, variances, measured or {}, level)
+
+
+def held_out_band(
+    layout: PeriodLayout,
+    runs: Mapping[str, np.ndarray],
+    noise_sd: Mapping[str, float],
+    measured: Mapping[str, np.ndarray],
+    level: float = 0.95,
+) -> Band:
+    """Bands of held-out sensors: the simulator at posterior draws plus the sensor's noise.
+
+    Parameters
+    ----------
+    layout
+        The study's periods (bands on the training periods and the test window).
+    runs
+        Output name -> simulated series at ``S`` posterior draws ``(S, n_total)``.
+    noise_sd
+        Output name -> the sensor's stated accuracy (one standard deviation). [unit]
+    measured
+        Output name -> measured series ``(n_total,)``, for the PIT.
+    level
+        Probability of the outer band. [-]
+    """
+    covered = np.zeros(layout.n_total, dtype=bool)
+    for start in layout.train_starts:
+        covered[start : start + layout.period] = True
+    covered[layout.test_begin :] = True
+    means, variances = {}, {}
+    for name, sims in runs.items():
+        mean = np.asarray(sims, dtype=float)
+        means[name] = np.where(covered, mean, np.nan)
+        variances[name] = np.where(covered, float(noise_sd[name]) ** 2, np.nan) + 0.0 * mean
+    return _mixture_band(means, variances, measured, level)
+
+
+def merge_bands(first: Band, second: Band) -> Band:
+    """One band holding the outputs of both (same level)."""
+    return Band(
+        first.mean | second.mean,
+        first.lower | second.lower,
+        first.upper | second.upper,
+        first.lower50 | second.lower50,
+        first.upper50 | second.upper50,
+        first.pit | second.pit,
+        first.mc_error | second.mc_error,
+        first.level,
+    )
 
 
 def delta_series(
@@ -292,13 +453,19 @@ def windows(layout: PeriodLayout) -> np.ndarray:
 _SERIES = {
     "measured": "measured {what}",
     "nominal": "{what} simulated at the nominal parameters",
-    "calibrated": "calibrated prediction of {what}: mean over posterior draws",
-    "calibrated_lower": "lower bound of the band of the calibrated prediction of {what}",
-    "calibrated_upper": "upper bound of the band of the calibrated prediction of {what}",
+    "calibrated": "calibrated prediction of {what}: mean of the predictive distribution",
+    "calibrated_lower": "lower edge of the outer (level) band of a measurement of {what}",
+    "calibrated_upper": "upper edge of the outer (level) band of a measurement of {what}",
+    "calibrated_lower50": "lower edge of the 50 % band of a measurement of {what}",
+    "calibrated_upper50": "upper edge of the 50 % band of a measurement of {what}",
+    "calibrated_pit": "PIT of the measured {what}: predictive CDF at the measurement",
     "delta": "discrepancy Delta = observation - model of {what} (mean)",
     "corrected": "calibrated prediction of {what} corrected by Delta",
-    "corrected_lower": "lower bound of the band of the corrected prediction of {what}",
-    "corrected_upper": "upper bound of the band of the corrected prediction of {what}",
+    "corrected_lower": "lower edge of the outer band of the corrected prediction of {what}",
+    "corrected_upper": "upper edge of the outer band of the corrected prediction of {what}",
+    "corrected_lower50": "lower edge of the 50 % band of the corrected prediction of {what}",
+    "corrected_upper50": "upper edge of the 50 % band of the corrected prediction of {what}",
+    "corrected_pit": "PIT of the measured {what} under the corrected prediction",
 }
 _WINDOW = "part of the record: warmup, train (training periods), test (test window) or unused"
 
@@ -319,41 +486,71 @@ def predictions_dataset(
     Variables ``{o}_measured``, ``{o}_nominal``, ``{o}_calibrated``,
     ``{o}_calibrated_lower``/``_upper`` and, with a discrepancy, ``{o}_delta``,
     ``{o}_corrected``, ``{o}_corrected_lower``/``_upper``; boundary conditions
-    as ``bc_{name}``. Coordinates ``time`` (UTC) and ``window``.
+    as ``bc_{name}``. Coordinates ``time`` (UTC) and ``window``. Held-out
+    outputs (``attrs["held_out"]``) have no corrected series.
     """
     data: dict[str, Any] = {}
     for o in measured:
         unit = GLOSSARY[o].unit if o in GLOSSARY else ""
         what = f"{o} ({GLOSSARY[o].description})" if o in GLOSSARY else o
-        series = {
-            "measured": measured[o],
-            "nominal": nominal[o],
-            "calibrated": calibrated.mean[o],
-            "calibrated_lower": calibrated.lower[o],
-            "calibrated_upper": calibrated.upper[o],
-        }
-        if corrected is not None and delta is not None:
-            series |= {
-                "delta": delta[o],
-                "corrected": corrected.mean[o],
-                "corrected_lower": corrected.lower[o],
-                "corrected_upper": corrected.upper[o],
-            }
+        series = {"measured": measured[o], "nominal": nominal[o]}
+        series |= _band_series("calibrated", calibrated, o)
+        if corrected is not None and delta is not None and o in delta:
+            series |= {"delta": delta[o], **_band_series("corrected", corrected, o)}
         for kind, values in series.items():
             text = _SERIES[kind].format(what=what)
-            attrs = {"units": unit, "long_name": f"{o} {kind}", "description": text}
-            data[f"{o}_{kind}"] = ("time", np.asarray(values, dtype=float), attrs)
+            var = {"units": unit, "long_name": f"{o} {kind}", "description": text}
+            data[f"{o}_{kind}"] = ("time", np.asarray(values, dtype=float), var)
     for b, values in boundary.items():
         unit = GLOSSARY[b].unit if b in GLOSSARY else ""
         text = f"boundary condition {b}" + (f": {GLOSSARY[b].description}" if b in GLOSSARY else "")
-        attrs = {"units": unit, "long_name": b, "description": text}
-        data[f"bc_{b}"] = ("time", np.asarray(values, dtype=float), attrs)
+        var = {"units": unit, "long_name": b, "description": text}
+        data[f"bc_{b}"] = ("time", np.asarray(values, dtype=float), var)
     coords = {
         "time": ("time", np.asarray(times).astype("datetime64[ns]"), {"description": "UTC"}),
         "window": ("time", windows(layout), {"description": _WINDOW}),
     }
-    meta = {"outputs": ",".join(measured), "boundary": ",".join(boundary)}
+    meta: dict[str, Any] = {"outputs": ",".join(measured), "boundary": ",".join(boundary)}
+    for name, band in (("calibrated", calibrated), ("corrected", corrected)):
+        if band is not None:
+            for o, error in band.mc_error.items():
+                meta[f"{o}_{name}_mc_error"] = error
     return xr.Dataset(data, coords=coords, attrs=meta | dict(attrs or {}))
+
+
+def _band_series(kind: str, band: Band, output: str) -> dict[str, np.ndarray]:
+    """The series a band contributes to the dataset (those it has)."""
+    out = {kind: band.mean[output], f"{kind}_lower": band.lower[output]}
+    out[f"{kind}_upper"] = band.upper[output]
+    for suffix, values in (("lower50", band.lower50), ("upper50", band.upper50), ("pit", band.pit)):
+        if output in values:
+            out[f"{kind}_{suffix}"] = values[output]
+    return out
+
+
+def _band_scores(
+    ds: xr.Dataset, prefix: str, obs: np.ndarray, mask: np.ndarray
+) -> dict[str, float]:
+    """Coverage of the bands and the PIT's distance from uniform on the masked samples."""
+    ok = mask & np.isfinite(obs)
+    out: dict[str, float] = {}
+    if not ok.any():
+        return out
+    for name, lower, upper in (
+        ("coverage95", "lower", "upper"),
+        ("coverage50", "lower50", "upper50"),
+    ):
+        if f"{prefix}_{lower}" in ds:
+            lo, hi = ds[f"{prefix}_{lower}"].values[ok], ds[f"{prefix}_{upper}"].values[ok]
+            out[name] = float(np.mean((obs[ok] >= lo) & (obs[ok] <= hi)))
+    if f"{prefix}_pit" in ds:
+        values = np.sort(ds[f"{prefix}_pit"].values[ok])
+        values = values[np.isfinite(values)]
+        if values.size:
+            n = values.size
+            steps = np.arange(1, n + 1) / n
+            out["pit_ks"] = float(max(np.max(steps - values), np.max(values - (steps - 1.0 / n))))
+    return out
 
 
 def _window_mask(ds: xr.Dataset, window: str) -> np.ndarray:
@@ -375,13 +572,9 @@ def metrics_table(ds: xr.Dataset) -> pd.DataFrame:
                 if not mask.any():
                     continue
                 m = fit_metrics(sim[mask], obs[mask]).as_dict()
-                m["coverage95"] = float("nan")
+                m |= {"coverage95": np.nan, "coverage50": np.nan, "pit_ks": np.nan}
                 if model != "nominal":
-                    lo = ds[f"{o}_{key}_lower"].values[mask]
-                    hi = ds[f"{o}_{key}_upper"].values[mask]
-                    ok = np.isfinite(obs[mask])
-                    inside = (obs[mask] >= lo) & (obs[mask] <= hi)
-                    m["coverage95"] = float(np.mean(inside[ok])) if ok.any() else float("nan")
+                    m |= _band_scores(ds, f"{o}_{key}", obs, mask)
                 m["guideline14"] = meets_guideline14(m["cv_rmse"], m["nmbe"])
                 rows.append({"output": o, "model": model, "window": window} | m)
     columns = [*KEY_COLUMNS, *(c.name for c in metric_columns("csv"))]

@@ -101,6 +101,21 @@ class Results:
             have.pop("discrepancy")
         return tuple(stage for stage, value in have.items() if value is None)
 
+    def diagnostic_warnings(self) -> tuple[str, ...]:
+        """Every failed MCMC diagnostic of the phases here, each prefixed by its phase.
+
+        The calibration's chains (theta*, the precisions, AR coefficients) and the
+        difference process's theta* chains: R-hat above 1.01, bulk or tail ESS
+        below 400, stuck chains, too few chains, NUTS divergences. Empty where
+        every diagnostic passed (``bayescal run --strict`` exits non-zero otherwise).
+        """
+        found: list[str] = []
+        if self.posterior is not None:
+            found += [f"calibration: {w}" for w in self.posterior.warnings]
+        if self.discrepancy is not None:
+            found += [f"difference process: {w}" for w in self.discrepancy.posterior.warnings]
+        return tuple(found)
+
 
 class _LogFile(logging.FileHandler):
     """A log file that stops writing, quietly, when writing fails (a full disk): the run

@@ -26,25 +26,29 @@ import numpy as np
 import pandas as pd
 import xarray as xr
 
-from bayescal.calibration.posterior import Posterior, calibrate
+from bayescal.calibration.posterior import Derived, Posterior, calibrate
 from bayescal.config import Study, build_simulator, nominal_parameters
+from bayescal.config.study import OutputError
 from bayescal.data.measured import MeasuredData, load_measured
 from bayescal.design import Design, Prior, latin_hypercube
-from bayescal.emulator.assemble import Assembled, assemble
+from bayescal.emulator.assemble import Assembled, NoiseSpec, assemble
 from bayescal.emulator.gp import Emulator, LooResult
 from bayescal.emulator.training import train
-from bayescal.errors import SimulatorError
+from bayescal.errors import ConfigError, SimulatorError
 from bayescal.pipeline.keys import derived_seed
 from bayescal.pipeline.predict import (
     Band,
     delta_series,
+    held_out_band,
+    likelihood_delta_variance,
+    merge_bands,
     metrics_table,
     predict_band,
     predictions_dataset,
     simulator_band,
 )
 from bayescal.runner import Progress, RunResults, run_design
-from bayescal.simulators.base import Simulator
+from bayescal.simulators.base import Derivable, Simulator
 
 if TYPE_CHECKING:
     from bayescal.discrepancy import Discrepancy
@@ -79,7 +83,9 @@ class Options:
     scheduler
         Dask scheduler address (implies the dask backend).
     chains_backend
-        ``"processes"`` (MCMC chains in parallel) or ``"serial"``.
+        ``"auto"`` (lockstep groups or worker processes, whichever the target
+        suits; the discrepancy phase takes ``"processes"``), ``"processes"``
+        (MCMC chains in parallel) or ``"serial"``.
     progress
         Factory of a simulation progress callback: ``total -> (progress, close)``
         (see :func:`bayescal.cli.progress.simulation_bar`), called only when runs are due.
@@ -93,7 +99,7 @@ class Options:
     backend: str | None = None
     jobs: int | None = None
     scheduler: str | None = None
-    chains_backend: str = "processes"
+    chains_backend: str = "auto"
     progress: Callable[[int], tuple[Progress, Callable[[], None]]] | None = None
     mcmc_progress: Callable[[str, int], tuple[Tick, Callable[[], None]]] | None = None
     checkpoint_seconds: float = 30.0
@@ -213,6 +219,12 @@ def assemble_runs(ctx: Context, sims: RunResults) -> Assembled:
     """Cut, standardise and project the successful runs and the measurements."""
     design = Design(sims.design.priors, sims.unit, seed=sims.design.seed)
     section = ctx.study.emulator
+    outputs = ctx.study.outputs
+    noise = {
+        name: NoiseSpec(spec.model, outputs.noise_sd(name), spec.discrepancy)
+        for name in outputs.calibrate
+        for spec in [outputs.errors.get(name, OutputError())]
+    }
     return assemble(
         design,
         sims.outputs,
@@ -224,6 +236,8 @@ def assemble_runs(ctx: Context, sims: RunResults) -> Assembled:
         components=section.pca_components,
         input_variance=section.input_pca_variance,
         history=section.history_periods,
+        scale=section.standardise,
+        noise=noise,
     )
 
 
@@ -245,6 +259,7 @@ def build_emulator(
     try:
         emulator = train(
             assembled,
+            method=section.training,
             n_burn=section.burn,
             n_draws=section.samples,
             n_chains=n_chains,
@@ -270,7 +285,7 @@ def calibrate_stage(
     total = section.chains * (section.burn + section.samples)
     tick, close = _mcmc_tick(ctx, "calibration", total)
     try:
-        return calibrate(
+        post = calibrate(
             em.emulator,
             em.assembled,
             priors,
@@ -284,9 +299,30 @@ def calibrate_stage(
             callback=tick,
             checkpoint_dir=checkpoint_dir,
             checkpoint_seconds=ctx.options.checkpoint_seconds,
+            observations=em.assembled.observations,
         )
     finally:
         close()
+    return post.with_derived(derived_draws(ctx, post))
+
+
+def derived_draws(ctx: Context, posterior: Posterior) -> dict[str, Derived]:
+    """The simulator's derived quantities and the study's ``[derived]`` at every draw."""
+    draws = posterior.draws
+    names = posterior.names
+    out: dict[str, Derived] = {}
+    sim = ctx.simulator
+    if isinstance(sim, Derivable) and sim.derived_units:
+        flat = draws.reshape(-1, len(names))
+        rows = [sim.derived(dict(zip(names, map(float, row), strict=True))) for row in flat]
+        for quantity, (unit, text) in sim.derived_units.items():
+            column = np.array([r[quantity] for r in rows]).reshape(draws.shape[:2])
+            out[quantity] = Derived(column, unit, text)
+    by_name = {n: draws[..., k] for k, n in enumerate(names)}
+    for quantity, expression in ctx.study.expressions().items():
+        spec = ctx.study.derived[quantity]
+        out[quantity] = Derived(expression.evaluate(by_name), spec.unit, spec.description)
+    return out
 
 
 def discrepancy_stage(ctx: Context, em: EmulatorResult, posterior: Posterior) -> Discrepancy | None:
@@ -310,11 +346,16 @@ def discrepancy_stage(ctx: Context, em: EmulatorResult, posterior: Posterior) ->
             n_burn=n_burn,
             n_draws=n_draws,
             seed=ctx.seed("discrepancy"),
-            backend=ctx.options.chains_backend,  # type: ignore[arg-type]
+            backend=_plain_backend(ctx.options.chains_backend),  # type: ignore[arg-type]
             callback=tick,
         )
     finally:
         close()
+
+
+def _plain_backend(backend: str) -> str:
+    """``"auto"`` as ``"processes"``, for a stage that chooses no backend itself."""
+    return "processes" if backend == "auto" else backend
 
 
 @dataclass(frozen=True)
@@ -340,37 +381,50 @@ def predict_stage(
         corrected = _band(ctx, em, discrepancy.posterior, discrepancy)
         delta = delta_series(em.assembled, discrepancy, list(em.emulator.outputs.names))
     m = ctx.measured
+    held = ctx.study.outputs.held_out
     ds = predictions_dataset(
         m.times,
         m.layout,
-        {o: m.outputs[o] for o in ctx.study.outputs.calibrate},
+        {o: m.outputs[o] for o in ctx.study.outputs.calibrate} | dict(m.held_out),
         nominal if nominal is not None else nominal_run(ctx),
         band,
         m.forcing.series,
         corrected,
         delta,
-        attrs={"level": section.level, "study": ctx.study.study.name},
+        attrs={"level": section.level, "study": ctx.study.study.name, "held_out": ",".join(held)},
     )
     return Predictions(ds, metrics_table(ds))
 
 
+def held_out_sd(ctx: Context, name: str) -> float:
+    """A held-out sensor's noise SD: its stated accuracy (a range: the geometric mean)."""
+    value = ctx.study.outputs.noise_sd(name)
+    if value is None:  # pragma: no cover - the study's validation requires it
+        raise ConfigError(f"outputs.held_out: {name!r} has no [outputs.errors.{name}] sd")
+    return float(value) if isinstance(value, float) else float(np.sqrt(value[0] * value[1]))
+
+
 def posterior_runs(
     ctx: Context, posterior: Posterior, n: int
-) -> tuple[dict[str, np.ndarray], np.ndarray]:
-    """The simulator at ``n`` posterior draws (thinned evenly): outputs and their lambda*."""
+) -> tuple[dict[str, np.ndarray], np.ndarray, np.ndarray]:
+    """The simulator at ``n`` posterior draws (thinned evenly).
+
+    Returns the outputs of the runs that succeeded, their lambda*s and their
+    draws' indices in the posterior's flattened draws.
+    """
     theta = posterior.draws.reshape(-1, len(posterior.names))
-    lam_star = posterior.lam_star.reshape(-1)
+    lam_stars = posterior.lam_stars.reshape(theta.shape[0], -1)
     pick = np.unique(np.linspace(0, theta.shape[0] - 1, min(n, theta.shape[0])).astype(int))
     design = Design.from_values(ctx.priors, theta[pick])
     res = simulate(ctx, design)
-    return res.outputs, lam_star[pick][res.indices]
+    return res.outputs, lam_stars[pick][res.indices], pick[res.indices]
 
 
 def _band(
     ctx: Context, em: EmulatorResult, posterior: Posterior, discrepancy: Discrepancy | None
 ) -> Band:
     section = ctx.study.predict
-    seed = ctx.seed("predict")
+    measured = {o: ctx.measured.outputs[o] for o in ctx.study.outputs.calibrate}
     # With method = "simulator" the model part is the simulator re-run at posterior
     # draws (of the Delta phase for the corrected prediction) and Delta is added to
     # it: Delta was estimated against the emulator on the training periods, where
@@ -378,21 +432,34 @@ def _band(
     # their conditions only the simulator is trustworthy (Twin House test week:
     # emulator + Delta RMSE 2.25 W/m², simulator + Delta see docs/case-studies.md).
     if section.method == "simulator":
-        runs, lam_star = posterior_runs(ctx, posterior, section.runs)
-        return simulator_band(
+        runs, lam_star, drawn = posterior_runs(ctx, posterior, section.runs)
+        model_error = likelihood_delta_variance(em.emulator, em.assembled, posterior)
+        band = simulator_band(
             em.assembled,
             {o: runs[o] for o in em.emulator.outputs.names},
             lam_star,
             level=section.level,
-            seed=seed,
             discrepancy=discrepancy,
+            measured=measured,
+            model_error={o: v[drawn] for o, v in model_error.items()},
         )
+        held = ctx.study.outputs.held_out
+        if discrepancy is not None or not held:
+            return band
+        extra = held_out_band(
+            ctx.measured.layout,
+            {o: runs[o] for o in held},
+            {o: held_out_sd(ctx, o) for o in held},
+            ctx.measured.held_out,
+            section.level,
+        )
+        return merge_bands(band, extra)
     return predict_band(
         em.emulator,
         em.assembled,
         posterior,
         draws=section.draws,
         level=section.level,
-        seed=seed,
         discrepancy=discrepancy,
+        measured=measured,
     )

@@ -52,6 +52,7 @@ __all__ = [
     "plot_posterior_histograms",
     "plot_rho_sensitivity",
     "plot_traces",
+    "save_figure",
 ]
 
 DPI = 100
@@ -71,7 +72,7 @@ def label(name: str) -> str:
     return f"{name} [{q.unit}]" if q else name
 
 
-def _save(fig: Figure, path: str | Path) -> Path:
+def save_figure(fig: Figure, path: str | Path) -> Path:
     """Write ``fig`` as PNG atomically and close it."""
     try:
         target = atomic_write(path, lambda f: fig.savefig(f, format="png", dpi=DPI))
@@ -159,7 +160,7 @@ def plot_posterior_histograms(
         ax.set_visible(False)
     fig.suptitle("Posterior of θ* over its prior")
     fig.tight_layout()
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 def _zoom(ax: Axes, draws: FloatArray, prior_width: float) -> None:
@@ -205,7 +206,7 @@ def plot_traces(path: str | Path, posterior: Posterior) -> Path:
     axes[-1].set_xlabel("kept iteration")
     fig.suptitle("MCMC traces")
     fig.tight_layout()
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 def plot_pairs(path: str | Path, posterior: Posterior) -> Path:
@@ -254,7 +255,7 @@ def plot_pairs(path: str | Path, posterior: Posterior) -> Path:
             ax.tick_params(labelsize=7)
     fig.suptitle("Posterior pairs of θ*")
     fig.tight_layout()
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 # ----------------------------------------------------------------------------- emulator
@@ -298,7 +299,7 @@ def plot_rho_sensitivity(path: str | Path, rho: ArrayLike, input_labels: Sequenc
     fig.colorbar(image, ax=ax, label="ρ = exp(−β/4)")
     ax.set_title("Emulator sensitivity ρ per input and basis (small: influential)", fontsize=10)
     fig.tight_layout()
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 def plot_pca_variance(path: str | Path, explained: ArrayLike, p: int) -> Path:
@@ -339,7 +340,7 @@ def plot_pca_variance(path: str | Path, explained: ArrayLike, p: int) -> Path:
         a.grid(alpha=0.3)
     ax.legend(fontsize=8, loc="center right")
     fig.tight_layout()
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 def loo_predictions(emulator: Emulator) -> dict[str, tuple[FloatArray, FloatArray, FloatArray]]:
@@ -434,7 +435,7 @@ def plot_emulator_loo(
         ax_z.grid(alpha=0.3)
         ax_z.legend(fontsize=8)
     fig.tight_layout()
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 # ----------------------------------------------------------------------------- predictions
@@ -451,8 +452,14 @@ def _window_panel(
     lower, upper = series["lower"], series["upper"]
     if lower is not None and upper is not None:
         ax.fill_between(
-            t, lower[mask], upper[mask], color=COLOURS["model"], alpha=0.25, lw=0, label="95 % band"
+            t, lower[mask], upper[mask], color=COLOURS["model"], alpha=0.2, lw=0, label="95 % band"
         )
+    lower50, upper50 = series.get("lower50"), series.get("upper50")
+    if lower50 is not None and upper50 is not None:
+        ax.fill_between(
+            t, lower50[mask], upper50[mask], color=COLOURS["model"], alpha=0.35, lw=0,
+            label="50 % band",
+        )  # fmt: skip
     measured, nominal = series["measured"], series["nominal"]
     if measured is not None:
         ax.plot(t, measured[mask], color=COLOURS["measured"], lw=0.8, label="measured")
@@ -482,6 +489,7 @@ def plot_fit(
     nominal: ArrayLike | None = None,
     model_label: str = "calibrated",
     windows: Sequence[str] = ("train", "test"),
+    band50: tuple[ArrayLike | None, ArrayLike | None] = (None, None),
 ) -> Path:
     """Measured against predicted output on the training and test windows, with a band.
 
@@ -508,6 +516,8 @@ def plot_fit(
         Legend entry of the prediction.
     windows
         Windows to draw, in order.
+    band50
+        Limits of the 50 % band (drawn darker inside the outer one), when given.
 
     Returns
     -------
@@ -522,6 +532,8 @@ def plot_fit(
         "lower": _opt(lower),
         "upper": _opt(upper),
         "nominal": _opt(nominal),
+        "lower50": _opt(band50[0]),
+        "upper50": _opt(band50[1]),
     }
     pred = series["mean"]
     if pred is None or pred.shape != t.shape or labels.shape != t.shape:
@@ -540,7 +552,7 @@ def plot_fit(
         axes[0, 0].text(0.5, 0.5, "no prediction in these windows", ha="center", va="center")
     axes[-1, 0].set_xlabel("time (UTC)")
     fig.tight_layout()
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 def plot_delta_vs_boundary(
@@ -591,7 +603,7 @@ def plot_delta_vs_boundary(
         ax.set_visible(False)
     fig.suptitle(f"Discrepancy of {name} against the boundary conditions")
     fig.tight_layout()
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 def _pearson(a: FloatArray, b: FloatArray) -> float:

@@ -36,6 +36,7 @@ from bayescal.emulator.gp import Emulator, LooResult
 from bayescal.glossary import GLOSSARY
 from bayescal.metrics import MODELS, MetricColumn, metric_columns
 from bayescal.report import figures as fg
+from bayescal.report.uncertainty import uncertainty_figures, uncertainty_section
 from bayescal.runner import RunFailure
 
 __all__ = ["SECTIONS", "ReportInputs", "write_draws_csv", "write_figures", "write_report"]
@@ -44,6 +45,7 @@ __all__ = ["SECTIONS", "ReportInputs", "write_draws_csv", "write_figures", "writ
 SECTIONS = (
     "Summary",
     "Calibration parameters",
+    "Uncertainty",
     "Fit metrics",
     "Emulator",
     "Discrepancy",
@@ -171,6 +173,16 @@ def _outputs(ds: xr.Dataset) -> list[str]:
     return [o for o in str(ds.attrs.get("outputs", "")).split(",") if o]
 
 
+def _held_out(ds: xr.Dataset) -> set[str]:
+    return {o for o in str(ds.attrs.get("held_out", "")).split(",") if o}
+
+
+HELD_OUT_NOTE = (
+    " Held-out sensor: never calibrated on; its band is the simulator at posterior draws "
+    "plus the sensor's stated noise."
+)
+
+
 def _boundary(ds: xr.Dataset) -> list[str]:
     return [b for b in str(ds.attrs.get("boundary", "")).split(",") if b and f"bc_{b}" in ds]
 
@@ -234,6 +246,13 @@ def _posterior_figures(inputs: ReportInputs, folder: Path) -> list[FigureEntry]:
     ]
 
 
+def _uncertainty_figures(inputs: ReportInputs, folder: Path) -> list[FigureEntry]:
+    made = uncertainty_figures(
+        inputs.posterior, inputs.predictions, _outputs(inputs.predictions), folder
+    )
+    return [FigureEntry("Uncertainty", title, text, path) for title, text, path in made]
+
+
 def _emulator_figures(inputs: ReportInputs, folder: Path) -> list[FigureEntry]:
     em, loo = inputs.emulator, inputs.loo
     loo_means = fg.loo_predictions(em)
@@ -282,8 +301,10 @@ def _prediction_figures(inputs: ReportInputs, folder: Path) -> list[FigureEntry]
         out.append(
             FigureEntry(
                 "Predictions",
-                f"{o}: calibrated model",
-                "Measured, nominal (dashed) and calibrated prediction with its 95 % band.",
+                f"{o}: calibrated model" + (" (held out)" if o in _held_out(ds) else ""),
+                "Measured, nominal (dashed) and calibrated prediction with the 95 % and 50 % "
+                "bands of a measurement (see Uncertainty for what they include)."
+                + (HELD_OUT_NOTE if o in _held_out(ds) else ""),
                 fg.plot_fit(
                     folder / f"fit_{slug}.png",
                     times,
@@ -294,6 +315,10 @@ def _prediction_figures(inputs: ReportInputs, folder: Path) -> list[FigureEntry]
                     _values(ds, f"{o}_calibrated_lower"),
                     _values(ds, f"{o}_calibrated_upper"),
                     nominal=_values(ds, f"{o}_nominal"),
+                    band50=(
+                        _values(ds, f"{o}_calibrated_lower50"),
+                        _values(ds, f"{o}_calibrated_upper50"),
+                    ),
                 ),
             )
         )
@@ -370,6 +395,7 @@ def write_figures(inputs: ReportInputs, folder: str | Path) -> list[FigureEntry]
     target.mkdir(parents=True, exist_ok=True)
     makers: list[Callable[[ReportInputs, Path], list[FigureEntry]]] = [
         _posterior_figures,
+        _uncertainty_figures,
         _emulator_figures,
         _prediction_figures,
         _delta_figures,
@@ -416,6 +442,11 @@ def _ess(value: object) -> str:
 def _posterior_table(post: Posterior) -> str:
     table = post.summary()
     units = {name: prior.unit for name, prior in post.priors.items()}
+    units |= {name: "1" for name in post.aux_names}
+    units |= {
+        ("noise_sd" if len(post.noise) == 1 else f"noise_sd_{o.name}"): o.unit for o in post.noise
+    }
+    units |= {name: d.unit for name, d in post.derived.items()}
     rows = [
         [
             name,
@@ -456,7 +487,9 @@ METRIC_NOTE = (
     "under-predicts. Coverage is the share of measured samples inside the 95 % band "
     "(not defined for the nominal model). “Meets Guideline 14” checks the hourly criteria "
     "CV(RMSE) ≤ 30 % and |NMBE| ≤ 10 %, written for whole-building energy use and shown "
-    "for orientation only.</p>"
+    "for orientation only. The test window is read only for these final metrics: "
+    "parameters, priors and error models are chosen on the training periods "
+    "(<code>bayescal compare</code>, leave-one-period-out cross-validation).</p>"
 )
 
 
@@ -474,7 +507,7 @@ def _metric_cell(column: MetricColumn, value: Any) -> str:
     return _num(float(value) * column.scale)
 
 
-def _metrics_block(metrics: pd.DataFrame, output: str, window: str) -> str:
+def _metrics_block(metrics: pd.DataFrame, output: str, window: str, held: bool = False) -> str:
     rows = metrics[(metrics["output"] == output) & (metrics["window"] == window)]
     if rows.empty:
         return ""
@@ -491,13 +524,16 @@ def _metrics_block(metrics: pd.DataFrame, output: str, window: str) -> str:
         cells = [_metric_cell(c, r[c.name]) for c in columns]
         body.append([model.replace("+delta", " + Δ"), *cells])
     title = f"{output} [{unit}], {WINDOWS.get(window, window)}"
+    if held:
+        title += " (held-out sensor: never calibrated on)"
     return f"<h3>{_e(title)}</h3>" + _table(header, body)
 
 
 def _metrics(inputs: ReportInputs) -> str:
     m = inputs.metrics
     outputs = list(dict.fromkeys([*_outputs(inputs.predictions), *m["output"].unique()]))
-    blocks = [_metrics_block(m, o, w) for o in outputs for w in ("train", "test")]
+    held = _held_out(inputs.predictions)
+    blocks = [_metrics_block(m, o, w, o in held) for o in outputs for w in ("train", "test")]
     text = "".join(b for b in blocks if b)
     return METRIC_NOTE + (text or "<p>No metrics were computed.</p>")
 
@@ -597,6 +633,9 @@ def render(inputs: ReportInputs, entries: Sequence[FigureEntry]) -> str:
     bodies = {
         "Summary": _summary(inputs),
         "Calibration parameters": _parameters(inputs),
+        "Uncertainty": uncertainty_section(
+            inputs.posterior, inputs.predictions, _outputs(inputs.predictions), _table
+        ),
         "Fit metrics": _metrics(inputs),
         "Emulator": _emulator(inputs),
         "Discrepancy": _discrepancy(inputs),

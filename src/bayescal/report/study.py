@@ -50,6 +50,8 @@ def delta_correlation(predictions: xr.Dataset) -> pd.DataFrame:
     boundary = [b for b in ds.attrs["boundary"].split(",") if b]
     table = {}
     for o in outputs:
+        if f"{o}_delta" not in ds:  # a held-out output has no Delta
+            continue
         d = ds[f"{o}_delta"].values[train]
         row = {}
         for b in boundary:

@@ -121,6 +121,26 @@ class Simulator(Protocol):
         ...
 
 
+@runtime_checkable
+class Derivable(Protocol):
+    """A simulator that computes physical summaries of a parameter set.
+
+    ``derived_units`` maps each quantity's name to ``(unit, description)``;
+    ``derived(parameters)`` returns their values (the wall's U-value, thermal
+    resistance and areal heat capacity, the box's heat-loss coefficient). The
+    pipeline evaluates them at every posterior draw.
+    """
+
+    @property
+    def derived_units(self) -> Mapping[str, tuple[str, str]]:
+        """Quantity name -> ``(unit, description)``."""
+        ...
+
+    def derived(self, parameters: Mapping[str, float]) -> dict[str, float]:
+        """The quantities at ``parameters`` (physical units)."""
+        ...
+
+
 def check_parameters(parameters: Mapping[str, float], allowed: tuple[str, ...], who: str) -> None:
     """Raise :class:`SimulatorError` for unknown or non-finite parameter values."""
     unknown = sorted(set(parameters) - set(allowed))

@@ -33,8 +33,7 @@ Window
     (a cavity absorbs nearly all the light that enters it; what leaves again
     through the window is neglected).
 Exterior surfaces
-    Absorbed solar ``absorptivity · G_face`` (``G_face`` from pvlib's
-    transposition, :mod:`bayescal.simulators.solar`); convection
+    Absorbed solar ``absorptivity · G_face`` (pvlib's transposition); convection
     ``h_c = h_out_a + h_out_b · v`` (ISO 6946 annex C: 4 + 4 v); long-wave
     exchange ``emissivity · sigma · F (T⁴ - T_s⁴)`` with the sky (view factor
     ``(1 + cos tilt)/2``) and with the ground at air temperature
@@ -48,8 +47,7 @@ Exterior surfaces
 Inside surfaces
     Constant combined (convective + long-wave) coefficients to the air node,
     the ISO 6946 inside surface resistances for a heated space: walls
-    ``1/0.13``, ceiling (heat flowing up) ``1/0.10``, floor (heat flowing down)
-    ``1/0.17`` W/(m²·K); the window uses the wall value.
+    ``1/0.13``, ceiling (heat up) ``1/0.10``, floor (heat down) ``1/0.17`` W/(m²·K).
 Time stepping
     Backward Euler on the forcing clock, refined to at most ``max_step``
     seconds with boundary conditions interpolated linearly between samples.
@@ -72,6 +70,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass
+from typing import ClassVar
 
 import numpy as np
 from scipy.constants import Stefan_Boltzmann, zero_Celsius
@@ -457,6 +456,17 @@ class TestBox:
     ) -> float:
         """Steady heat-loss coefficient, air node to outside (:func:`steady_ua`). [W/K]"""
         return steady_ua(self.values(parameters), wind_speed, temp_radiant)
+
+    derived_units: ClassVar[Mapping[str, tuple[str, str]]] = {  # Derivable's summaries
+        "UA": ("W/K", "steady heat-loss coefficient, air node to outside, without wind"),
+        "R_wall": ("m²·K/W", "thermal resistance of the walls (thickness / k_wall)"),
+    }
+
+    def derived(self, parameters: Mapping[str, float]) -> dict[str, float]:
+        """Steady heat-loss coefficient and the walls' resistance at ``parameters``."""
+        values = self.values(parameters)
+        r_wall = values["thickness"] / values["k_wall"]
+        return {"UA": steady_ua(values, 0.0, 10.0), "R_wall": r_wall}
 
     def simulate(self, parameters: Mapping[str, float], forcing: Forcing) -> dict[str, np.ndarray]:
         """Run once; outputs at the forcing's instants (see the module docstring)."""

@@ -112,6 +112,14 @@ _NEGLIGIBLE_DECAY = 1e-18
 _CELL_FACTOR = 1.8
 
 
+#: The wall's derived quantities: name -> (unit, description).
+WALL_DERIVED = {
+    "R_wall": ("m²·K/W", "thermal resistance of the layers, surface to surface"),
+    "U_value": ("W/(m²·K)", "thermal transmittance with the surface resistances r_si, r_se"),
+    "areal_heat_capacity": ("J/(m²·K)", "sum of density x specific heat x thickness of the layers"),
+}
+
+
 @dataclass(frozen=True)
 class WallState:
     """Physical description of the wall for one parameter set.
@@ -277,6 +285,29 @@ class MultilayerWall:
         """
         check_parameters(parameters, self.parameter_names, _WHO)
         return _substitute(self._nominal, self._targets, parameters, self._boundary)
+
+    @property
+    def derived_units(self) -> dict[str, tuple[str, str]]:
+        """The wall's physical summaries (:class:`~bayescal.simulators.base.Derivable`)."""
+        return dict(WALL_DERIVED)
+
+    def derived(self, parameters: Mapping[str, float]) -> dict[str, float]:
+        """Thermal resistance, U-value and areal heat capacity at ``parameters``.
+
+        ``R_wall`` is the layers' resistance surface to surface, ``U_value``
+        adds the surface resistances ``r_si`` and ``r_se`` (EN ISO 6946), and
+        ``areal_heat_capacity`` is the sum of density x specific heat x
+        thickness of the layers.
+        """
+        state = self.wall_state(parameters)
+        r_wall = sum(la.thickness / la.conductivity for la in state.layers)
+        return {
+            "R_wall": r_wall,
+            "U_value": 1.0 / (r_wall + state.r_si + state.r_se),
+            "areal_heat_capacity": sum(
+                la.density * la.specific_heat * la.thickness for la in state.layers
+            ),
+        }
 
     def propagator(self, parameters: Mapping[str, float], step: float) -> Propagator:
         """Precomputed modal propagation for one parameter set and clock step.

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from bayescal.errors import SimulatorError
-from bayescal.simulators.base import Forcing, Simulator, check_parameters
+from bayescal.simulators.base import Derivable, Forcing, Simulator, check_parameters
 
 __all__ = ["SensorModel", "TargetedSimulator"]
 
@@ -33,6 +33,14 @@ class _Wrapped:
     @property
     def output_names(self) -> tuple[str, ...]:
         return self.inner.output_names
+
+    @property
+    def derived_units(self) -> dict[str, tuple[str, str]]:
+        """The inner simulator's derived quantities (none if it has none)."""
+        return dict(self.inner.derived_units) if isinstance(self.inner, Derivable) else {}
+
+    def _inner_derived(self, inner: Mapping[str, float]) -> dict[str, float]:
+        return self.inner.derived(inner) if isinstance(self.inner, Derivable) else {}
 
 
 @dataclass(frozen=True)
@@ -61,6 +69,12 @@ class TargetedSimulator(_Wrapped):
         inner = {t: float(v) for name, v in parameters.items() for t in self.targets[name]}
         return self.inner.simulate(inner, forcing)
 
+    def derived(self, parameters: Mapping[str, float]) -> dict[str, float]:
+        """The inner simulator's derived quantities at the mapped parameters."""
+        return self._inner_derived(
+            {t: float(v) for name, v in parameters.items() for t in self.targets[name]}
+        )
+
 
 @dataclass(frozen=True)
 class SensorModel(_Wrapped):
@@ -87,6 +101,10 @@ class SensorModel(_Wrapped):
     @property
     def parameter_names(self) -> tuple[str, ...]:
         return self.names
+
+    def derived(self, parameters: Mapping[str, float]) -> dict[str, float]:
+        """The inner simulator's derived quantities (sensor parameters left out)."""
+        return self._inner_derived({k: v for k, v in parameters.items() if k not in self.sensors})
 
     def simulate(self, parameters: Mapping[str, float], forcing: Forcing) -> dict[str, np.ndarray]:
         check_parameters(parameters, self.parameter_names, type(self.inner).__name__)

@@ -18,6 +18,7 @@ Output folder (the module that writes and reads each file)::
     predictions.nc          measured, nominal, calibrated (+ Delta)      store.predictions
     metrics.csv             fit metrics per output, model and window     store.predictions
     report/report.html      the report (figures in report/figures/)      bayescal.report
+    leave-period-out.npz    per-period scores of bayescal compare        store.crossval
     checkpoints/            MCMC snapshots of an unfinished stage        bayescal.calibration
     stages.json             what finished, with which key, how long,     store.stages
                             each file's size and SHA-256

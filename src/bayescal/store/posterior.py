@@ -2,9 +2,12 @@
 
 ``posterior.nc`` opens as a user expects. Its **root group** is a flat dataset
 of the draws in physical units, one variable per calibration parameter with
-dimensions ``(chain, draw)``, plus ``lambda``, ``lambda_star`` and ``lp`` (the
-log posterior), each with ``units`` and ``description`` (and ``long_name``)
-attributes::
+dimensions ``(chain, draw)``, plus ``lambda``, the observation precisions
+(``lambda_star``, or ``lambda_star_<output>`` with several outputs), the AR(1)
+coefficients (``phi[_<output>]``) where an output has AR(1) errors, each
+output's noise standard deviation in its unit (``noise_sd[_<output>]``) and
+``lp`` (the log posterior), each with ``units`` and ``description`` (and
+``long_name``) attributes::
 
     import xarray as xr
     ds = xr.open_dataset("out/posterior.nc")     # k_cb, cp_cb, ..., lambda, lp
@@ -24,18 +27,20 @@ with two more columns, ``unit`` and ``description``.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 from pathlib import Path
-from typing import Final
+from typing import Any, Final
 
 import numpy as np
 import pandas as pd
 import xarray as xr
 
 from bayescal.atomic import atomic_write_path, atomic_write_text
-from bayescal.calibration.posterior import LAMBDA_NAMES, Posterior
+from bayescal.calibration.posterior import LAMBDA_NAMES, Derived, Posterior
 from bayescal.design import prior_from_spec
+from bayescal.emulator.noise import OutputNoise
 from bayescal.store.netcdf import (
     DIMENSIONLESS,
     ENGINE,
@@ -62,22 +67,40 @@ FILE: Final = "posterior.nc"
 SUMMARY_FILE: Final = "posterior-summary.csv"
 LOG_DENSITY: Final = "lp"
 
-_LAMBDA_DESCRIPTIONS = {
-    LAMBDA_NAMES[0]: "precision lambda of the simulations outside the PCA basis "
-    "(standardised units)",
-    LAMBDA_NAMES[1]: "precision lambda* of the measurement error (standardised units)",
-}
+
+def _aux_description(name: str) -> str:
+    if name == "lambda":
+        return "precision lambda of the simulations outside the PCA basis (standardised units)"
+    if name.startswith("lambda_star"):
+        which = name.removeprefix("lambda_star").lstrip("_") or "the output"
+        return f"precision lambda* of the measurement error of {which} (standardised units)"
+    if name.startswith("delta_rel"):
+        which = name.removeprefix("delta_rel").lstrip("_") or "the output"
+        return (
+            f"variance of the model discrepancy of {which} relative to the emulator's "
+            "prior variance of a weight"
+        )
+    which = name.removeprefix("phi").lstrip("_") or "the output"
+    return f"AR(1) coefficient of the measurement errors of {which} within a period"
+
+
+def _noise_name(posterior: Posterior, output: str) -> str:
+    return "noise_sd" if len(posterior.noise) == 1 else f"noise_sd_{output}"
 
 
 def variable_attributes(posterior: Posterior) -> dict[str, tuple[str, str]]:
-    """Name -> ``(unit, description)`` of every column of the draws and of ``lp``.
+    """Name -> ``(unit, description)`` of every column of the draws, the noise SDs and ``lp``.
 
     theta* in the parameter's unit and with its description (from the priors;
-    ``""`` where the study gave none), ``lambda`` and ``lambda_star``
-    dimensionless (``"1"``).
+    ``""`` where the study gave none), ``lambda``, ``lambda_star`` and ``phi``
+    dimensionless (``"1"``), ``noise_sd`` in the output's unit.
     """
     out = {name: (prior.unit, prior.description) for name, prior in posterior.priors.items()}
-    out |= {name: (DIMENSIONLESS, text) for name, text in _LAMBDA_DESCRIPTIONS.items()}
+    out |= {name: (DIMENSIONLESS, _aux_description(name)) for name in posterior.aux_names}
+    for o in posterior.noise:
+        text = f"standard deviation of the measurement error of {o.name}"
+        out[_noise_name(posterior, o.name)] = (o.unit, text)
+    out |= {name: (d.unit, d.description) for name, d in posterior.derived.items()}
     out[LOG_DENSITY] = ("", "log posterior density (up to a constant) at the draw")
     return out
 
@@ -92,6 +115,10 @@ def posterior_dataset(posterior: Posterior) -> xr.Dataset:
     draws = posterior.all_draws()
     chains, n_draws = draws.shape[:2]
     data = {name: (("chain", "draw"), draws[..., k]) for k, name in enumerate(posterior.all_names)}
+    for output, sd in posterior.noise_sd().items():
+        data[_noise_name(posterior, output)] = (("chain", "draw"), sd)
+    for name, derived in posterior.derived.items():
+        data[name] = (("chain", "draw"), derived.draws)
     data[LOG_DENSITY] = (("chain", "draw"), posterior.log_density)
     ds = xr.Dataset(
         data,
@@ -137,6 +164,12 @@ def save_posterior(
         attrs={
             "format": POSTERIOR_FORMAT,
             "names": json.dumps(list(posterior.names)),
+            "aux_names": json.dumps(list(posterior.aux_names)),
+            "noise": json.dumps([dataclasses.asdict(o) for o in posterior.noise]),
+            "derived": json.dumps(
+                {n: [d.unit, d.description] for n, d in posterior.derived.items()},
+                ensure_ascii=False,
+            ),
             "priors": json.dumps({n: p.spec() for n, p in posterior.priors.items()}),
             "seed": posterior.seed,
             "algebra": posterior.algebra,
@@ -173,17 +206,33 @@ def load_posterior(path: str | os.PathLike[str]) -> Posterior:
     post = read_dataset(path, group="posterior")
     stats = read_dataset(path, group="sample_stats")
     priors = {n: prior_from_spec(**spec) for n, spec in json.loads(extra.attrs["priors"]).items()}
+    aux_names = json.loads(extra.attrs.get("aux_names", json.dumps(LAMBDA_NAMES)))
+    noise = tuple(_output_noise(o) for o in json.loads(extra.attrs.get("noise", "[]")))
+    specs = json.loads(extra.attrs.get("derived", "{}"))
+    derived = {}
+    if specs:
+        flat = read_dataset(path)
+        derived = {n: Derived(flat[n].values, u, d) for n, (u, d) in specs.items()}
     return Posterior.build(
         names=json.loads(extra.attrs["names"]),
         priors=priors,
         unit_draws=extra["unit_draws"].values,
-        lam=post[LAMBDA_NAMES[0]].values,
-        lam_star=post[LAMBDA_NAMES[1]].values,
         log_density=stats[LOG_DENSITY].values,
         acceptance=extra["acceptance"].values,
         seed=int(extra.attrs["seed"]),
         algebra=str(extra.attrs["algebra"]),
-    )
+        aux=np.stack([post[n].values for n in aux_names], axis=-1),
+        aux_names=aux_names,
+        noise=noise,
+    ).with_derived(derived)
+
+
+def _output_noise(spec: dict[str, Any]) -> OutputNoise:
+    """An :class:`OutputNoise` from its JSON form (tuples come back as lists)."""
+    fields = dict(spec)
+    for key in ("rows", "bases", "prior"):
+        fields[key] = tuple(fields[key])
+    return OutputNoise(**fields)
 
 
 def posterior_summary(posterior: Posterior) -> pd.DataFrame:

@@ -51,18 +51,20 @@ from numpy.typing import ArrayLike, NDArray
 
 from bayescal.errors import ConfigError
 from bayescal.mcmc.checkpoint import ChainCheckpoint
+from bayescal.mcmc.samplers import joint as jm
 from bayescal.mcmc.samplers.base import (
     Box,
     Callback,
     LogDensity,
     SamplerResult,
     ScalarMap,
+    adaptation_step,
     check_log_density,
     check_run_args,
     fixed_mask,
     initial_scales,
 )
-from bayescal.mcmc.samplers.mwg import MetropolisWithinGibbs
+from bayescal.mcmc.samplers.mwg import MetropolisWithinGibbs, joint_covariance
 from bayescal.mcmc.samplers.schedule import Schedule, fingerprint
 
 __all__ = [
@@ -94,8 +96,9 @@ class LockstepTarget(Protocol):
         """Log-densities ``(B,)`` at the starting points ``(B, d)``, made current."""
         ...
 
-    def propose(self, points: FloatArray, coordinate: int) -> FloatArray:
-        """Log-densities ``(B,)`` at the current points with ``coordinate`` replaced."""
+    def propose(self, points: FloatArray, coordinate: int | tuple[int, ...]) -> FloatArray:
+        """Log-densities ``(B,)`` at the current points with ``coordinate`` replaced
+        (a tuple: the coordinates of a joint move)."""
         ...
 
     def commit(self, accept: BoolArray) -> None:
@@ -119,7 +122,7 @@ class Stateless:
         """Log-densities at the starting points."""
         return np.asarray(self.log_density(points), dtype=float)
 
-    def propose(self, points: FloatArray, coordinate: int) -> FloatArray:
+    def propose(self, points: FloatArray, coordinate: int | tuple[int, ...]) -> FloatArray:
         """Log-densities at the proposals (``coordinate`` is not used)."""
         return np.asarray(self.log_density(points), dtype=float)
 
@@ -222,16 +225,18 @@ def run_lockstep(
     for row in x:
         box.check_start(row)
     active = np.flatnonzero(~fixed_mask(sampler.fixed, x.shape[1])).tolist()
+    joint = sampler.joint_indices(x.shape[1], active)
     maps = [box.scalar_map(i) for i in range(x.shape[1])]
-    chains = _Chains(sampler, _Lockstep(target, maps, active, box), list(rngs), callback)
+    loop = _Lockstep(target, maps, active, box, joint, sampler.n_burn)
+    chains = _Chains(sampler, loop, list(rngs), callback)
 
     def start() -> None:
-        chains.s = _initial_states(sampler, target, x, box)
+        chains.s = _initial_states(sampler, target, x, box, joint)
 
     schedule = Schedule(sampler.n_burn, n_draws, sampler.thin, sampler.batch_size)
     fp = fingerprint(sampler, x, n_draws, rng_states)
     draws, lps = schedule.run(chains, start, checkpoint, fp, x.shape)
-    return _results(sampler, chains.s, draws, lps, active, n_draws, rng_states)
+    return _results(sampler, chains.s, draws, lps, active, joint, n_draws, rng_states)
 
 
 @dataclass
@@ -244,6 +249,7 @@ class _States:
     lp: FloatArray  # (B,)
     scale: FloatArray  # (B, d)
     accepted: NDArray[np.int64]  # (B, d)
+    joint: list[jm.JointState] | None = None  # one per chain
 
 
 @dataclass
@@ -265,6 +271,8 @@ class _Chains:
 
     def reset_counts(self) -> None:
         self.s.accepted[:] = 0
+        for js in self.s.joint or ():
+            js.accepted = 0
 
     def adapt(self, size: int, n_batch: int) -> None:
         """Per chain and coordinate, the serial sampler's rule (same float operations)."""
@@ -272,11 +280,17 @@ class _Chains:
         active = self.loop.active
         up = self.s.accepted[:, active] > self.sampler.target * size
         self.s.scale[:, active] *= np.where(up, factor_up, factor_down)
+        if self.s.joint is not None:
+            step = adaptation_step(n_batch, self.sampler.max_adapt)
+            for k, js in enumerate(self.s.joint):
+                js.adapt(size, step, self.s.scale[k, self.loop.joint])
 
     def state(self) -> tuple[dict[str, Any], dict[str, Any]]:
         s = self.s
         arrays: dict[str, Any] = {"x": s.x, "z": s.z, "log_jac": s.log_jac, "scale": s.scale}
         arrays |= {"accepted": s.accepted, "lp": s.lp}
+        for k, js in enumerate(s.joint or ()):
+            arrays |= js.arrays(f"joint{k}_")
         return arrays, {"rng": [rng.bit_generator.state for rng in self.rngs]}
 
     def restore(self, arrays: dict[str, np.ndarray], meta: dict[str, Any]) -> None:
@@ -292,10 +306,18 @@ class _Chains:
             scale=np.array(arrays["scale"], dtype=float),
             accepted=np.array(arrays["accepted"], dtype=np.int64),
         )
+        if self.loop.joint:
+            self.s.joint = [
+                jm.JointState.from_arrays(arrays, f"joint{k}_") for k in range(x.shape[0])
+            ]
 
 
 def _initial_states(
-    sampler: MetropolisWithinGibbs, target: LockstepTarget, x: FloatArray, box: Box
+    sampler: MetropolisWithinGibbs,
+    target: LockstepTarget,
+    x: FloatArray,
+    box: Box,
+    joint: list[int],
 ) -> _States:
     lp = np.asarray(target.start(x.copy()), dtype=float).reshape(-1)
     for k, value in enumerate(lp.tolist()):
@@ -310,7 +332,10 @@ def _initial_states(
     log_jac = np.array([box.log_jacobians(row) for row in z], dtype=float).reshape(x.shape)
     scale = np.tile(initial_scales(sampler.scales, box), (x.shape[0], 1))
     accepted = np.zeros(x.shape, dtype=np.int64)
-    return _States(x.copy(), z, log_jac, lp, scale, accepted)
+    states = _States(x.copy(), z, log_jac, lp, scale, accepted)
+    if joint:
+        states.joint = [jm.JointState.start(row[joint]) for row in scale]
+    return states
 
 
 def _results(
@@ -319,6 +344,7 @@ def _results(
     draws: FloatArray,
     lps: FloatArray,
     active: list[int],
+    joint: list[int],
     n_draws: int,
     rng_states: list[Any],
 ) -> list[SamplerResult]:
@@ -339,6 +365,7 @@ def _results(
                 rng_state=rng_states[k],
                 n_burn=sampler.n_burn,
                 thin=sampler.thin,
+                proposal_cov=joint_covariance(s.joint[k] if s.joint else None, joint, d),
             )
         )
     return results
@@ -374,6 +401,8 @@ class _Lockstep:
     maps: list[ScalarMap | None]
     active: list[int]
     box: Box
+    joint: list[int]
+    n_burn: int
 
     def block(
         self,
@@ -391,11 +420,22 @@ class _Lockstep:
         # Each chain's generator, consumed exactly as the serial sampler does.
         eps = np.stack([rng.standard_normal((size, n_act)) for rng in rngs], axis=2)
         log_u = np.stack([np.log1p(-rng.random((size, n_act))) for rng in rngs], axis=2)
+        if self.joint:
+            n_j = len(self.joint)
+            eps_j = np.stack([rng.standard_normal((size, n_j)) for rng in rngs], axis=1)
+            log_u_j = np.stack([np.log1p(-rng.random(size)) for rng in rngs], axis=1)
         n_chains = len(rngs)
         kept: list[tuple[FloatArray, FloatArray]] = []
         for row in range(size):
             for k, i in enumerate(self.active):
                 self._update(s, i, eps[row, k], log_u[row, k])
+            if self.joint:
+                self._joint_update(s, eps_j[row], log_u_j[row])
+                if jm.collecting(n_done + row, self.n_burn):
+                    for b, js in enumerate(s.joint or ()):
+                        if jm.restarting(n_done + row, self.n_burn):
+                            js.restart()
+                        js.collect(s.z[b, self.joint])
             done = n_done + row + 1
             if keep_every and (done - keep_start) % keep_every == 0:
                 kept.append((s.x.copy(), s.lp.copy()))
@@ -434,3 +474,41 @@ class _Lockstep:
         s.log_jac[:, i] = np.where(accept, lj_new, s.log_jac[:, i])
         s.accepted[:, i] += accept
         s.x[:, i] = np.where(accept, x_new, old)
+
+    def _joint_update(self, s: _States, eps: FloatArray, log_u: FloatArray) -> None:
+        """One Metropolis update of the joint block in every chain (as the serial sampler)."""
+        joint, states = self.joint, s.joint
+        assert states is not None
+        n_chains = s.x.shape[0]
+        values = s.x[:, joint].copy()
+        jacobians: list[list[float]] = []
+        z_new = np.empty((n_chains, len(joint)))
+        ok = np.ones(n_chains, dtype=bool)
+        for b, js in enumerate(states):
+            z_new[b] = jm.propose(s.z[b, joint], js.chol, eps[b])
+            mapped = jm.map_values(self.maps, joint, z_new[b])
+            if mapped is None:
+                ok[b] = False
+                jacobians.append([])
+                continue
+            values[b] = mapped[0]
+            jacobians.append(mapped[1])
+        old = s.x[:, joint].copy()
+        s.x[:, joint] = values
+        lp_new = np.asarray(self.target.propose(s.x, tuple(joint)), dtype=float)
+        if not np.all(lp_new < _INF):
+            bad = int(np.flatnonzero(~(lp_new < _INF))[0])
+            check_log_density(float(lp_new[bad]), s.x[bad])
+        accept = np.zeros(n_chains, dtype=bool)
+        for b in range(n_chains):
+            if ok[b]:
+                lj_old = s.log_jac[b, joint].tolist()
+                ratio = jm.log_ratio(float(lp_new[b]), jacobians[b], float(s.lp[b]), lj_old)
+                accept[b] = bool(log_u[b] < ratio)
+        self.target.commit(accept)
+        for b in np.flatnonzero(accept).tolist():
+            s.lp[b] = lp_new[b]
+            s.z[b, joint] = z_new[b]
+            s.log_jac[b, joint] = jacobians[b]
+            states[b].accepted += 1
+        s.x[:, joint] = np.where(accept[:, None], values, old)

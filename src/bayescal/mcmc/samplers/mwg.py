@@ -14,6 +14,11 @@ References: G. O. Roberts and J. S. Rosenthal (2009), "Examples of adaptive
 MCMC", J. Comput. Graph. Stat. 18(2), 349-367; J. S. Rosenthal (2007),
 "AMCMC: An R interface for adaptive MCMC", Comput. Stat. Data Anal. 51.
 
+With ``joint`` set, a few coordinates also move together once per sweep, by
+a random walk whose covariance is learnt during burn-in
+(:mod:`bayescal.mcmc.samplers.joint`): it follows the ridges of correlated
+posteriors that one-coordinate steps crawl along.
+
 Bounded coordinates are sampled on a transformed scale or reflected at the
 bounds (see :mod:`bayescal.mcmc.samplers.base`); ``fixed`` coordinates
 keep their starting value.
@@ -38,6 +43,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from bayescal.errors import ConfigError
 from bayescal.mcmc.checkpoint import ChainCheckpoint
+from bayescal.mcmc.samplers import joint as jm
 from bayescal.mcmc.samplers.base import (
     BoundsMethod,
     Box,
@@ -66,6 +72,7 @@ class _State:
     lp: float
     scale: list[float]
     accepted: list[int]
+    joint: jm.JointState | None = None
 
 
 @dataclass(frozen=True)
@@ -95,6 +102,11 @@ class MetropolisWithinGibbs:
         Iterations per adaptation batch.
     max_adapt
         Cap of the per-batch change of a log proposal width.
+    joint
+        Indices of coordinates that also move together once per sweep
+        (:mod:`~bayescal.mcmc.samplers.joint`); at least two free coordinates,
+        ``bounds="transform"`` only. Empty: none (the draws are then those of
+        the plain sampler).
     """
 
     n_burn: int = 2000
@@ -107,6 +119,7 @@ class MetropolisWithinGibbs:
     target: float = 0.44
     batch_size: int = 50
     max_adapt: float = 0.01
+    joint: tuple[int, ...] = ()
 
     def __post_init__(self) -> None:
         check_run_args(1, self.n_burn, self.thin)
@@ -116,6 +129,22 @@ class MetropolisWithinGibbs:
             raise ConfigError(f"batch_size must be a positive integer, got {self.batch_size!r}")
         if not self.max_adapt > 0.0:
             raise ConfigError(f"max_adapt must be positive, got {self.max_adapt!r}")
+        object.__setattr__(self, "joint", tuple(int(i) for i in self.joint))
+        if self.joint and self.bounds != "transform":
+            raise ConfigError(
+                "joint moves need bounds='transform' (a folded joint step is not symmetric)"
+            )
+
+    def joint_indices(self, d: int, active: Sequence[int]) -> list[int]:
+        """The joint block checked against ``d`` coordinates and the free ones."""
+        joint = [int(i) for i in self.joint]
+        if not joint:
+            return []
+        if len(set(joint)) != len(joint) or not set(joint) <= set(active) or len(joint) < 2:
+            raise ConfigError(
+                f"joint must name at least two distinct free coordinates of {d}, got {joint}"
+            )
+        return joint
 
     def run(
         self,
@@ -156,10 +185,10 @@ class MetropolisWithinGibbs:
         box = Box.build(x.size, self.lower, self.upper, self.bounds)
         box.check_start(x)
         active = np.flatnonzero(~fixed_mask(self.fixed, x.size)).tolist()
+        joint = self.joint_indices(x.size, active)
         maps = [box.scalar_map(i) for i in range(x.size)]
-        chain = _Chain(
-            self, _Loop(log_density, maps, active, box.transforms, callback), rng, active
-        )
+        loop = _Loop(log_density, maps, active, box.transforms, callback, joint, self.n_burn)
+        chain = _Chain(self, loop, rng, active)
         fp = fingerprint(self, x, n_draws, rng_state)
 
         def start() -> None:
@@ -180,6 +209,7 @@ class MetropolisWithinGibbs:
             rng_state=rng_state,
             n_burn=self.n_burn,
             thin=self.thin,
+            proposal_cov=joint_covariance(state.joint, joint, x.size),
         )
 
     def _initial_state(self, log_density: LogDensity, x: NDArray[np.float64], box: Box) -> _State:
@@ -191,7 +221,12 @@ class MetropolisWithinGibbs:
             )
         z = box.to_sampling(x)
         log_jac = box.log_jacobians(z)
-        return _State(x, z.tolist(), log_jac, lp, initial_scales(self.scales, box).tolist(), [])
+        scales = initial_scales(self.scales, box)
+        joint = self.joint_indices(x.size, np.flatnonzero(~fixed_mask(self.fixed, x.size)).tolist())
+        state = _State(x, z.tolist(), log_jac, lp, scales.tolist(), [])
+        if joint:
+            state.joint = jm.JointState.start(scales[joint])
+        return state
 
     def adaptation(self, n_batch: int) -> tuple[float, float]:
         """Factors ``(up, down)`` of a proposal width after burn-in batch ``n_batch``."""
@@ -216,12 +251,18 @@ class _Chain:
 
     def reset_counts(self) -> None:
         self.s.accepted = [0] * self.s.x.size
+        if self.s.joint is not None:
+            self.s.joint.accepted = 0
 
     def adapt(self, size: int, n_batch: int) -> None:
         factor_up, factor_down = self.sampler.adaptation(n_batch)
         scale, counts, target = self.s.scale, self.s.accepted, self.sampler.target
         for i in self.active:
             scale[i] *= factor_up if counts[i] > target * size else factor_down
+        if self.s.joint is not None:
+            step = adaptation_step(n_batch, self.sampler.max_adapt)
+            widths = np.array([scale[i] for i in self.loop.joint])
+            self.s.joint.adapt(size, step, widths)
 
     def state(self) -> tuple[dict[str, Any], dict[str, Any]]:
         s = self.s
@@ -232,6 +273,8 @@ class _Chain:
             "scale": np.asarray(s.scale, dtype=float),
             "accepted": np.asarray(s.accepted, dtype=np.int64),
         }
+        if s.joint is not None:
+            arrays |= s.joint.arrays()
         return arrays, {"lp": s.lp, "rng": self.rng.bit_generator.state}
 
     def restore(self, arrays: dict[str, np.ndarray], meta: dict[str, Any]) -> None:
@@ -243,6 +286,7 @@ class _Chain:
             lp=float(meta["lp"]),
             scale=arrays["scale"].tolist(),
             accepted=[int(v) for v in arrays["accepted"]],
+            joint=jm.JointState.from_arrays(arrays) if "joint_chol" in arrays else None,
         )
 
 
@@ -255,6 +299,8 @@ class _Loop:
     active: list[int]
     transforms: bool
     callback: Callback | None
+    joint: list[int]
+    n_burn: int
 
     def block(
         self,
@@ -270,6 +316,9 @@ class _Loop:
         n_act = len(self.active)
         eps = rng.standard_normal((size, n_act)).tolist()
         log_u = np.log1p(-rng.random((size, n_act))).tolist()
+        if self.joint:
+            eps_j = rng.standard_normal((size, len(self.joint)))
+            log_u_j = np.log1p(-rng.random(size)).tolist()
         f_logp, maps, active, callback = self.log_density, self.maps, self.active, self.callback
         reflect = not self.transforms
         x, z, log_jac, scale, accepted = s.x, s.z, s.log_jac, s.scale, s.accepted
@@ -300,6 +349,15 @@ class _Loop:
                     accepted[i] += 1
                 else:
                     x[i] = old
+            if self.joint:
+                s.lp = lp
+                self._joint_move(s, eps_j[row], log_u_j[row])
+                lp = s.lp
+                if jm.collecting(n_done + row, self.n_burn):
+                    assert s.joint is not None
+                    if jm.restarting(n_done + row, self.n_burn):
+                        s.joint.restart()
+                    s.joint.collect(np.array([z[i] for i in self.joint]))
             done = n_done + row + 1
             if keep_every and (done - keep_start) % keep_every == 0:
                 kept.append((x.copy(), float(lp)))
@@ -307,3 +365,39 @@ class _Loop:
                 callback(done)
         s.lp = lp
         return kept
+
+    def _joint_move(self, s: _State, eps: NDArray[np.float64], log_u: float) -> None:
+        """One Metropolis update of the joint block (:mod:`~bayescal.mcmc.samplers.joint`)."""
+        js, joint, x, z, log_jac = s.joint, self.joint, s.x, s.z, s.log_jac
+        assert js is not None
+        z_new = jm.propose(np.array([z[i] for i in joint]), js.chol, eps)
+        mapped = jm.map_values(self.maps, joint, z_new)
+        if mapped is None:
+            return
+        values, jacobians = mapped
+        old = [x[i] for i in joint]
+        for k, i in enumerate(joint):
+            x[i] = values[k]
+        lp_new = self.log_density(x)
+        if not lp_new < _INF:
+            check_log_density(lp_new, x)
+        if log_u < jm.log_ratio(lp_new, jacobians, s.lp, [log_jac[i] for i in joint]):
+            s.lp = lp_new
+            for k, i in enumerate(joint):
+                z[i] = float(z_new[k])
+                log_jac[i] = jacobians[k]
+            js.accepted += 1
+        else:
+            for k, i in enumerate(joint):
+                x[i] = old[k]
+
+
+def joint_covariance(
+    js: jm.JointState | None, joint: Sequence[int], d: int
+) -> NDArray[np.float64] | None:
+    """The joint move's final proposal covariance embedded in ``(d, d)`` (``None``: none)."""
+    if js is None:
+        return None
+    cov = np.zeros((d, d))
+    cov[np.ix_(joint, joint)] = js.chol @ js.chol.T
+    return cov

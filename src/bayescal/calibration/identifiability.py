@@ -1,0 +1,131 @@
+"""What the data fix and what they leave open: identifiability of theta*.
+
+Three views of a posterior against its prior:
+
+* **contraction** per parameter, ``1 - var_posterior / var_prior`` (1: fixed by
+  the data, 0: the data said nothing);
+* the **posterior correlation matrix** of theta*;
+* the **principal directions** of the posterior relative to the prior. Each
+  parameter ``theta_k`` is put on a scale where its prior has unit standard
+  deviation: ``log theta_k`` for positive parameters (so a direction is a
+  product of powers: a resistance ``d / k`` is a direction in ``log k``), the
+  parameter itself otherwise. In these coordinates the prior is (about)
+  isotropic, so the eigenvectors of the posterior covariance are the
+  combinations the data inform most and least; the square root of each
+  eigenvalue is the posterior SD along that combination as a fraction of the
+  prior SD. A direction with a fraction near 1 is **unidentified**: "the data
+  fix k_brick^-0.7 x k_eps^-0.7 (the total resistance); the split is left open".
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from bayescal.calibration.posterior import Posterior
+
+__all__ = ["Direction", "Identifiability", "identifiability"]
+
+FloatArray = NDArray[np.float64]
+#: Posterior SD along a direction, as a fraction of the prior's, above which it is unidentified.
+UNIDENTIFIED = 0.7
+#: Prior draws used to measure the prior's spread on the working scale.
+PRIOR_DRAWS = 20_000
+
+
+@dataclass(frozen=True)
+class Direction:
+    """One principal direction of the posterior relative to the prior.
+
+    Attributes
+    ----------
+    exponents
+        Powers of the parameters on the working scale (log-scale parameters:
+        ``prod theta_k^e_k``; others: ``sum e_k theta_k``), largest magnitude 1,
+        ``(t,)``.
+    ratio
+        Posterior SD along the direction over the prior SD. [-]
+    """
+
+    exponents: FloatArray
+    ratio: float
+
+    def text(self, names: tuple[str, ...], log_scale: tuple[bool, ...]) -> str:
+        """The combination in words, e.g. ``k_brick^0.98 x k_eps^-1.00``."""
+        order = np.argsort(-np.abs(self.exponents))
+        terms = []
+        for k in order:
+            e = float(self.exponents[k])
+            if abs(e) < 0.15:
+                continue
+            terms.append(f"{names[k]}^{e:.2f}" if log_scale[k] else f"{e:+.2f} {names[k]}")
+        joined = " x ".join(terms) if all(log_scale[k] for k in order) else " ".join(terms)
+        return joined or "(none)"
+
+
+@dataclass(frozen=True)
+class Identifiability:
+    """Contraction, correlation and principal directions of a posterior (module docstring)."""
+
+    names: tuple[str, ...]
+    log_scale: tuple[bool, ...]
+    contraction: FloatArray
+    correlation: FloatArray
+    directions: tuple[Direction, ...]
+
+    def lines(self) -> list[str]:
+        """Plain sentences for ``bayescal show`` and the report."""
+        out = []
+        for d in self.directions:
+            what = d.text(self.names, self.log_scale)
+            pct = 100.0 * d.ratio
+            if d.ratio >= UNIDENTIFIED:
+                out.append(f"unidentified: {what} (posterior SD {pct:.0f} % of the prior's)")
+            else:
+                out.append(f"the data fix {what} (posterior SD {pct:.2g} % of the prior's)")
+        return out
+
+
+def _working_scale(posterior: Posterior, seed: int) -> tuple[FloatArray, FloatArray, list[bool]]:
+    """Posterior draws and prior SDs on the working scale (log where positive)."""
+    rng = np.random.default_rng(seed)
+    draws = posterior.draws.reshape(-1, len(posterior.names))
+    cols, sds, logs = [], [], []
+    for k, prior in enumerate(posterior.priors.values()):
+        prior_draws = prior.from_unit(prior.sample_unit(rng, PRIOR_DRAWS))
+        use_log = prior.lower > 0.0
+        scale = np.log if use_log else np.asarray
+        cols.append(scale(draws[:, k]))
+        sds.append(float(np.std(scale(prior_draws))))
+        logs.append(use_log)
+    return np.column_stack(cols), np.array(sds), logs
+
+
+def identifiability(posterior: Posterior, seed: int = 0) -> Identifiability:
+    """The three views of the module docstring for ``posterior``.
+
+    Parameters
+    ----------
+    posterior
+        The calibration posterior (its priors give the prior spread).
+    seed
+        Seed of the prior draws that measure the prior's spread.
+    """
+    draws, prior_sd, logs = _working_scale(posterior, seed)
+    z = draws / prior_sd
+    cov = np.atleast_2d(np.cov(z, rowvar=False))
+    sd = np.sqrt(np.diag(cov))
+    safe = np.where(sd > 0.0, sd, 1.0)
+    correlation = cov / np.outer(safe, safe)
+    contraction = 1.0 - np.diag(cov)
+    values, vectors = np.linalg.eigh(cov)
+    directions = []
+    for value, vector in zip(values, vectors.T, strict=True):
+        exponents = vector / prior_sd  # back to powers of log theta (or multiples of theta)
+        exponents = exponents / exponents[np.argmax(np.abs(exponents))]  # largest: +1
+        directions.append(Direction(exponents, float(np.sqrt(max(value, 0.0)))))
+    return Identifiability(
+        tuple(posterior.names), tuple(logs), contraction, correlation, tuple(directions)
+    )

@@ -1,0 +1,201 @@
+"""Leave-one-period-out predictive accuracy of a calibration (choices without the test window).
+
+To compare parameter sets, priors, error models or the discrepancy on the
+training data alone, each training period ``i`` is scored by its pointwise log
+predictive density under the posterior: for every retained draw ``s``
+
+    l_is = log p(y*_i | theta*_s, lambda*_s, phi_s, r_s; simulations),
+
+the density of the period's measurements given the draw and the simulator
+runs (not the other measured periods): in the weights' space,
+``w_hat_i ~ N(mu_i, diag(v_i) + r tau^-1 + N_obs)`` with ``mu_i, v_i`` the
+emulator's prediction at ``(theta*_s, x_i)``, ``r tau^-1`` a model discrepancy
+where one is used, ``N_obs`` the noise of the observed weights (white:
+``1 / (lambda* k_j^T k_j)``; AR(1): ``H0^-1 / lambda*``), plus the out-of-basis
+remainder of :mod:`bayescal.emulator.noise` (so the density is that of the
+measured samples, comparable across error models and bases).
+
+:func:`elpd` estimates the expected log predictive density of a left-out period
+by Pareto-smoothed importance sampling (ArviZ's ``loo``), with its standard
+error and the Pareto ``k`` of each period (above 0.7 the estimate of that
+period is unreliable: the report says so).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from bayescal.calibration.posterior import Posterior
+from bayescal.emulator.gp import Emulator
+from bayescal.emulator.kernel import LOG_2PI
+from bayescal.emulator.noise import ObservationModel, ar1_whiten
+from bayescal.mcmc.diagnostics import import_arviz
+
+__all__ = ["Elpd", "elpd", "period_log_densities", "pointwise_log_likelihood"]
+
+FloatArray = NDArray[np.float64]
+#: Pareto k above which PSIS-LOO is unreliable for a period (Vehtari et al. 2017).
+PARETO_K_MAX = 0.7
+
+
+def _thin(n_total: int, n: int) -> NDArray[np.intp]:
+    return np.unique(np.linspace(0, n_total - 1, min(n, n_total)).astype(int))
+
+
+def pointwise_log_likelihood(
+    emulator: Emulator,
+    observations: ObservationModel,
+    posterior: Posterior,
+    draws_per_chain: int = 250,
+) -> FloatArray:
+    """``l_is`` of the module docstring, ``(chains, draws, m*)``.
+
+    Parameters
+    ----------
+    emulator
+        The trained emulator.
+    observations
+        The outputs' error models and the measured training periods.
+    posterior
+        The calibration posterior (theta*, lambda*, phi, discrepancy r).
+    draws_per_chain
+        Draws per chain used (thinned evenly).
+    """
+    chains, n_draws = posterior.unit_draws.shape[:2]
+    pick = _thin(n_draws, draws_per_chain)
+    unit = posterior.unit_draws[:, pick]
+    aux = posterior.aux[:, pick]
+    names = posterior.aux_names
+    obs = observations
+    m = obs.y_star.shape[1]
+    x = emulator.x
+    out = np.empty((chains, pick.size, m))
+    ktk = emulator.basis.ktk
+    variances = np.array([k.variance for k in emulator.kernels])
+    ls_weights = obs.ls_weights()
+    for c in range(chains):
+        for s in range(pick.size):
+            mean, var = emulator.predict_weights(np.broadcast_to(unit[c, s], (m, unit.shape[2])), x)
+            values = dict(zip(names, aux[c, s], strict=True))
+            out[c, s] = period_log_densities(obs, values, mean, var, ktk, variances, ls_weights)
+    return out
+
+
+def period_log_densities(
+    obs: ObservationModel,
+    values: dict[str, float],
+    mean: FloatArray,
+    var: FloatArray,
+    ktk: FloatArray,
+    variances: FloatArray,
+    ls_weights: FloatArray,
+) -> FloatArray:
+    """Log density of every period's measurements ``(m*,)`` at one draw.
+
+    Parameters
+    ----------
+    obs
+        Error models and measured periods.
+    values
+        The draw's aux coordinates by name (``lambda_star..``, ``phi..``, ``delta_rel..``).
+    mean, var
+        The emulator's predictive mean and variance of the weights at the draw's
+        theta* and every period's ``x``, ``(m*, p)``. [-]
+    ktk
+        ``k_j^T k_j`` ``(p,)``. [-]
+    variances
+        ``1 / tau_j`` ``(p,)`` (scale of a discrepancy). [-]
+    ls_weights
+        Least-squares weights of the measured periods ``(m*, p)``. [-]
+    """
+    names = obs.names()
+    single = obs.n_outputs == 1
+    m = obs.y_star.shape[1]
+    total = np.zeros(m)
+    for q, o in enumerate(obs.outputs):
+        lam = values[names[q]]
+        bases = list(o.bases)
+        cov = np.zeros((m, o.p, o.p))
+        cov[:, np.arange(o.p), np.arange(o.p)] = var[:, bases]
+        if o.discrepancy:
+            r = values["delta_rel" if single else f"delta_rel_{o.name}"]
+            cov[:, np.arange(o.p), np.arange(o.p)] += r * variances[bases]
+        kq, yq = obs.block(q)
+        if o.model == "ar1":
+            phi = values["phi" if single else f"phi_{o.name}"]
+            piece = obs.gls(q, phi)
+            w_hat = piece.w_hat
+            cov += piece.h0_inv / lam
+            logdet_r, logdet_h0 = piece.logdet_r, piece.logdet_h0
+            resid = ar1_whiten(yq, phi) - ar1_whiten(kq, phi) @ w_hat.T
+        else:  # H0 = K^T K (diagonal for the GPMSA basis, whose vectors are orthogonal)
+            w_hat = ls_weights[:, bases]
+            gram = kq.T @ kq
+            cov += np.linalg.inv(gram)[None] / lam
+            logdet_r, logdet_h0 = 0.0, float(np.linalg.slogdet(gram)[1])
+            resid = yq - kq @ w_hat.T
+        rss = np.sum(resid * resid, axis=0)  # per period
+        diff = w_hat - mean[:, bases]
+        chol = np.linalg.cholesky(cov)
+        half = np.linalg.solve(chol, diff[:, :, None])[:, :, 0]
+        in_basis = -0.5 * (
+            o.p * LOG_2PI
+            + 2.0 * np.sum(np.log(np.diagonal(chol, axis1=1, axis2=2)), axis=1)
+            + np.sum(half * half, axis=1)
+        )
+        dof = o.n - o.p
+        remainder = -0.5 * (dof * (LOG_2PI - math.log(lam)) + logdet_r + logdet_h0 + lam * rss)
+        total += in_basis + remainder
+    return total
+
+
+@dataclass(frozen=True)
+class Elpd:
+    """Leave-one-period-out expected log predictive density.
+
+    Attributes
+    ----------
+    elpd
+        Sum over the training periods of the estimated log predictive density
+        of each period left out.
+    se
+        Its standard error.
+    pointwise
+        Per period ``(m*,)``.
+    pareto_k
+        Pareto ``k`` of each period's importance weights ``(m*,)``.
+    """
+
+    elpd: float
+    se: float
+    pointwise: FloatArray
+    pareto_k: FloatArray
+
+    @property
+    def unreliable(self) -> int:
+        """Periods whose Pareto ``k`` exceeds :data:`PARETO_K_MAX`."""
+        return int(np.sum(self.pareto_k > PARETO_K_MAX))
+
+
+def elpd(log_likelihood: FloatArray) -> Elpd:
+    """PSIS-LOO of ``(chains, draws, m*)`` pointwise log-likelihoods (ArviZ)."""
+    import warnings
+
+    az = import_arviz()
+    idata = az.from_dict(
+        posterior={"dummy": np.zeros(log_likelihood.shape[:2])},
+        log_likelihood={"y": log_likelihood},
+    )
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # ArviZ warns about high k; we report it per period
+        result = az.loo(idata, pointwise=True)
+    return Elpd(
+        float(result.elpd_loo),
+        float(result.se),
+        np.asarray(result.loo_i.values, dtype=float),
+        np.asarray(result.pareto_k.values, dtype=float),
+    )

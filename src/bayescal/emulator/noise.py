@@ -1,0 +1,363 @@
+"""Observation error models of the calibrated outputs: the observation block of eq. 16.
+
+Each calibrated output ``o`` (rows ``r_o`` of the stacked standardised outputs,
+``n_o`` samples per period, basis vectors ``B_o`` of the block-diagonal ``K``)
+is measured with an error that is independent between periods and outputs:
+
+    y*_{o,i} = K_o w*(theta*, x_i) + e_{o,i},   e_{o,i} ~ N(0, R_o(phi_o) / lambda*_o),
+
+``R = I`` for white noise (the paper) or the AR(1) correlation ``R_ab =
+phi^|a - b|`` within a period (residuals of a dynamic model drift slowly: the
+Twin House's have a lag-1 autocorrelation of 0.83). ``lambda*_o`` is a
+precision in standardised units: the noise's standard deviation in the
+output's unit is ``s_o / sqrt(lambda*_o)`` with ``s_o`` the output's scale
+(:func:`bayescal.emulator.basis.standardise`, ``scale="output"``).
+
+For any ``R`` the Gaussian density of a period factorises exactly into a part
+that sees theta* only through the weights and a remainder (method.md, "Noise
+and correlated residuals"): with ``H0 = K_o^T R^-1 K_o`` and the generalised
+least-squares weights ``w_hat = H0^-1 K_o^T R^-1 y``,
+
+    log N(y; K w, R / lambda*) = log N(w_hat; w, H0^-1 / lambda*)
+        - 1/2 [(n - p) log 2 pi - (n - p) log lambda* + log |R| + log |H0|
+               + lambda* y^T C0 y],    C0 = R^-1 - R^-1 K H0^-1 K^T R^-1.
+
+With white noise ``H0 = diag(k_j^T k_j)`` (the GPMSA basis is orthogonal), the
+first factor is the per-basis observation nugget of eq. 14 and the remainder
+is eq. 7 applied to ``Y*``: the Gamma prior of ``lambda*`` updated with shape
+``m* (n - p) / 2`` and rate ``RSS* / 2``. With AR(1) noise ``H0`` is full: the
+observed block couples an output's ``p_o`` weights within a period
+(:meth:`bayescal.calibration.kron.KronCalibrationDensity.pieces_grouped`), the
+weights ``w_hat`` move with ``phi`` and the remainder is evaluated explicitly.
+AR(1) products go through the prewhitening map ``z_1 = y_1``, ``z_t = (y_t -
+phi y_{t-1}) / sqrt(1 - phi^2)`` (``y^T R^-1 y = z^T z``, ``log |R| = (n - 1)
+log(1 - phi^2)``): ``O(n p)`` per period.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from functools import cached_property
+from typing import Literal
+
+import numpy as np
+from numpy.typing import ArrayLike
+from scipy import linalg
+
+from bayescal.emulator.kernel import LOG_2PI, FloatArray
+from bayescal.errors import ConfigError, DataError
+
+__all__ = [
+    "DEFAULT_NOISE_PRIOR",
+    "ErrorModel",
+    "GlsPieces",
+    "ObservationModel",
+    "OutputNoise",
+    "ar1_whiten",
+    "noise_prior_from_sd",
+]
+
+ErrorModel = Literal["white", "ar1"]
+
+#: Gamma(shape, rate) of ``lambda*`` (standardised units) when the study states
+#: no sensor accuracy: with the scale of "output" standardisation, its density of
+#: ``log sigma`` is flat (within 1 %) from ``sigma = 1e-3 s`` up: the data decide.
+DEFAULT_NOISE_PRIOR = (0.5, 1e-6)
+
+#: Largest ``|phi|`` of an AR(1) error (the correlation matrix must stay invertible).
+PHI_MAX = 0.999
+#: Range of the relative variance ``r`` of a model discrepancy (log-uniform prior):
+#: from negligible to as large as the emulator's prior variance of a weight.
+DELTA_RANGE = (1e-4, 1.0)
+
+
+def ar1_whiten(y: FloatArray, phi: float) -> FloatArray:
+    """The prewhitening map of AR(1) noise along axis 0 (``y^T R^-1 y = z^T z``).
+
+    Parameters
+    ----------
+    y
+        Series within a period along axis 0, ``(n, ...)``. [-]
+    phi
+        AR(1) coefficient, ``|phi| < 1``. [-]
+    """
+    z = np.array(y, dtype=float, copy=True)
+    if phi != 0.0:
+        z[1:] = (y[1:] - phi * y[:-1]) / math.sqrt(1.0 - phi * phi)
+    return z
+
+
+@dataclass(frozen=True)
+class OutputNoise:
+    """The observation error model of one calibrated output.
+
+    Parameters
+    ----------
+    name
+        Output name (glossary).
+    rows
+        ``(start, stop)`` of its rows in the stacked standardised outputs.
+    bases
+        Its basis vectors (columns of ``K``).
+    model
+        ``"white"`` or ``"ar1"``.
+    prior
+        Gamma ``(shape, rate)`` of ``lambda*`` before the data. [-]
+    scale
+        Physical units per standardised unit (the output's scale ``s_o``). [unit]
+    unit
+        The output's unit, for reports.
+    discrepancy
+        Whether the observed weights of this output also carry a model
+        discrepancy ``GP(0, r tau_j^-1 c_x)`` over the periods' conditions, its
+        relative variance ``r`` sampled (Kennedy and O'Hagan's ``delta(x)``
+        inside the likelihood; the paper's difference process is separate).
+    """
+
+    name: str
+    rows: tuple[int, int]
+    bases: tuple[int, ...]
+    model: ErrorModel = "white"
+    prior: tuple[float, float] = DEFAULT_NOISE_PRIOR
+    scale: float = 1.0
+    unit: str = ""
+    discrepancy: bool = False
+
+    def __post_init__(self) -> None:
+        if self.model not in ("white", "ar1"):
+            raise ConfigError(f"error model must be 'white' or 'ar1', got {self.model!r}")
+        shape, rate = self.prior
+        if not (math.isfinite(shape) and shape > 0.0 and math.isfinite(rate) and rate > 0.0):
+            raise ConfigError(
+                f"the noise prior of {self.name!r} needs a finite shape and rate > 0, "
+                f"got {self.prior!r}"
+            )
+        if not self.bases:
+            raise DataError(f"output {self.name!r} has no basis vector")
+
+    @property
+    def n(self) -> int:
+        """Samples per period ``n_o``."""
+        return self.rows[1] - self.rows[0]
+
+    @property
+    def p(self) -> int:
+        """Basis vectors ``p_o``."""
+        return len(self.bases)
+
+
+@dataclass(frozen=True)
+class GlsPieces:
+    """The observed weights and remainder terms of one output at one ``phi``.
+
+    Attributes
+    ----------
+    w_hat
+        Generalised least-squares weights ``(m*, p_o)``. [-]
+    h0_inv
+        ``(K_o^T R^-1 K_o)^-1`` ``(p_o, p_o)``: times ``1 / lambda*`` the noise
+        block of a period's weights. [-]
+    logdet_r, logdet_h0
+        ``log |R|`` and ``log |H0|`` (per period).
+    quad0
+        ``sum_i y_i^T C0 y_i`` over the periods.
+    """
+
+    w_hat: FloatArray
+    h0_inv: FloatArray
+    logdet_r: float
+    logdet_h0: float
+    quad0: float
+
+
+@dataclass(frozen=True)
+class ObservationModel:
+    """Every calibrated output's error model with the measured periods it applies to.
+
+    Parameters
+    ----------
+    outputs
+        One :class:`OutputNoise` per output, in stacking order.
+    k
+        The basis ``K`` ``(N, p)`` (block diagonal over the outputs). [-]
+    y_star
+        Standardised measured periods ``(N, m*)``. [-]
+    """
+
+    outputs: tuple[OutputNoise, ...]
+    k: FloatArray
+    y_star: FloatArray
+    _ktk: FloatArray = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "outputs", tuple(self.outputs))
+        n, p = self.k.shape
+        if self.y_star.shape[0] != n:
+            raise DataError(f"Y* has {self.y_star.shape[0]} rows, K has {n}")
+        covered = sorted(j for o in self.outputs for j in o.bases)
+        if covered != list(range(p)):
+            raise DataError(f"the outputs' bases {covered} do not cover the {p} basis vectors")
+        for o in self.outputs:
+            outside = np.delete(self.k[:, list(o.bases)], np.s_[o.rows[0] : o.rows[1]], axis=0)
+            if np.any(outside != 0.0):
+                raise DataError(f"basis vectors of {o.name!r} reach rows of another output")
+        object.__setattr__(self, "_ktk", np.einsum("ij,ij->j", self.k, self.k))
+
+    # ------------------------------------------------------------ layout
+
+    @property
+    def n_outputs(self) -> int:
+        """Number of outputs ``O`` (and of ``lambda*`` coordinates)."""
+        return len(self.outputs)
+
+    @cached_property
+    def ar_outputs(self) -> tuple[int, ...]:
+        """Indices of the outputs with AR(1) errors (one ``phi`` coordinate each)."""
+        return tuple(q for q, o in enumerate(self.outputs) if o.model == "ar1")
+
+    @cached_property
+    def delta_outputs(self) -> tuple[int, ...]:
+        """Indices of the outputs with a model discrepancy (one ``r`` coordinate each)."""
+        return tuple(q for q, o in enumerate(self.outputs) if o.discrepancy)
+
+    @property
+    def coupled(self) -> bool:
+        """Whether some output's observed weights are coupled (AR(1) errors)."""
+        return bool(self.ar_outputs)
+
+    @cached_property
+    def group_of_basis(self) -> tuple[int, ...]:
+        """The output of every basis vector ``(p,)``."""
+        out = [0] * self.k.shape[1]
+        for q, o in enumerate(self.outputs):
+            for j in o.bases:
+                out[j] = q
+        return tuple(out)
+
+    def names(self) -> tuple[str, ...]:
+        """Coordinate names of the precisions and AR coefficients."""
+        single = self.n_outputs == 1
+        lam = ["lambda_star" if single else f"lambda_star_{o.name}" for o in self.outputs]
+        phi = ["phi" if single else f"phi_{self.outputs[q].name}" for q in self.ar_outputs]
+        rel = [
+            "delta_rel" if single else f"delta_rel_{self.outputs[q].name}"
+            for q in self.delta_outputs
+        ]
+        return (*lam, *phi, *rel)
+
+    # ------------------------------------------------------------ white outputs
+
+    def block(self, q: int) -> tuple[FloatArray, FloatArray]:
+        """``K_o`` ``(n_o, p_o)`` and ``Y*_o`` ``(n_o, m*)`` of output ``q``."""
+        o = self.outputs[q]
+        rows = slice(*o.rows)
+        return self.k[rows][:, list(o.bases)], self.y_star[rows]
+
+    def white_prior(self, q: int) -> tuple[float, float]:
+        """Gamma of ``lambda*`` of white output ``q`` after eq. 7 (its prior and the RSS)."""
+        o = self.outputs[q]
+        ko, yo = self.block(q)
+        w = linalg.solve(ko.T @ ko, ko.T @ yo, assume_a="pos")
+        resid = yo - ko @ w
+        m = yo.shape[1]
+        return (
+            o.prior[0] + 0.5 * m * (o.n - o.p),
+            o.prior[1] + 0.5 * float(np.sum(resid * resid)),
+        )
+
+    def ls_weights(self) -> FloatArray:
+        """Least-squares weights of every period ``(m*, p)`` (eq. 13)."""
+        gram = self.k.T @ self.k
+        return np.asarray(linalg.solve(gram, self.k.T @ self.y_star, assume_a="pos").T)
+
+    def white_nuggets(self, lam_star: ArrayLike) -> FloatArray:
+        """Per-basis observation nuggets ``1 / (lambda*_o k_j^T k_j)`` ``(p,)``."""
+        lam = np.asarray(lam_star, dtype=float)[list(self.group_of_basis)]
+        out: FloatArray = 1.0 / (self._ktk * lam)
+        return out
+
+    # ------------------------------------------------------------ AR(1) outputs
+
+    def gls(self, q: int, phi: float) -> GlsPieces:
+        """Generalised least squares of output ``q`` under AR(1) errors with ``phi``."""
+        if not abs(phi) < 1.0:
+            raise ValueError(f"AR(1) coefficient must satisfy |phi| < 1, got {phi}")
+        ko, yo = self.block(q)
+        kz, yz = ar1_whiten(ko, phi), ar1_whiten(yo, phi)
+        h0 = kz.T @ kz
+        chol = linalg.cho_factor(h0, lower=True, check_finite=False)
+        w_hat = linalg.cho_solve(chol, kz.T @ yz, check_finite=False)  # (p_o, m*)
+        resid = yz - kz @ w_hat
+        return GlsPieces(
+            w_hat=np.ascontiguousarray(w_hat.T),
+            h0_inv=linalg.cho_solve(chol, np.eye(h0.shape[0]), check_finite=False),
+            logdet_r=(ko.shape[0] - 1) * math.log1p(-phi * phi),
+            logdet_h0=2.0 * float(np.sum(np.log(np.diag(chol[0])))),
+            quad0=float(np.sum(resid * resid)),
+        )
+
+    def remainder(self, q: int, pieces: GlsPieces, lam_star: float) -> float:
+        """The remainder of output ``q``'s density summed over the periods (module docstring)."""
+        o = self.outputs[q]
+        m = self.y_star.shape[1]
+        dof = m * (o.n - o.p)
+        return -0.5 * (
+            dof * (LOG_2PI - math.log(lam_star))
+            + m * (pieces.logdet_r + pieces.logdet_h0)
+            + lam_star * pieces.quad0
+        )
+
+    def noise_sd(self, lam_star: ArrayLike) -> FloatArray:
+        """Noise standard deviation of every output in its unit, ``(..., O)``."""
+        scale = np.array([o.scale for o in self.outputs])
+        out: FloatArray = scale / np.sqrt(np.asarray(lam_star, dtype=float))
+        return out
+
+
+def noise_prior_from_sd(
+    sd: float | Sequence[float], scale: float, name: str = "output"
+) -> tuple[float, float]:
+    """The Gamma prior of ``lambda*`` (standardised) from a sensor accuracy in physical units.
+
+    Parameters
+    ----------
+    sd
+        One standard deviation (the prior is centred on it, shape 2: the noise
+        SD lies within about [0.6, 2.9] x ``sd`` with 95 % probability) or a range
+        ``[low, high]`` taken as the central 95 % interval of the noise SD. [unit]
+    scale
+        The output's scale ``s_o``. [unit]
+    name
+        The output, for messages.
+    """
+    from scipy import optimize, stats
+
+    values = [float(sd)] if isinstance(sd, int | float) else [float(v) for v in sd]
+    if not all(math.isfinite(v) and v > 0.0 for v in values) or len(values) not in (1, 2):
+        raise ConfigError(
+            f"noise sd of {name!r} must be one positive value or a range [low, high], got {sd!r}"
+        )
+    if len(values) == 1:
+        lam = (scale / values[0]) ** 2
+        return 2.0, 2.0 / lam
+    low, high = values
+    if not low < high:
+        raise ConfigError(f"noise sd range of {name!r} must have low < high, got {values}")
+    # sigma = lam^-1/2: sigma's 2.5 % / 97.5 % quantiles are lam's 97.5 % / 2.5 % ones.
+    ratio = (high / low) ** 2
+
+    def spread(log_a: float) -> float:
+        g = stats.gamma(math.exp(log_a))
+        return float(np.log(g.ppf(0.975)) - np.log(g.ppf(0.025)) - math.log(ratio))
+
+    bracket = (math.log(0.1), math.log(1e6))
+    if not spread(bracket[0]) > 0.0 > spread(bracket[1]):
+        raise ConfigError(
+            f"noise sd range of {name!r} spans a factor {high / low:.3g}; give a range "
+            "between about 1.001 and 1e4 times its low end"
+        )
+    a = math.exp(optimize.brentq(spread, *bracket))
+    rate = float(stats.gamma(a).ppf(0.975)) * (low / scale) ** 2
+    return a, rate

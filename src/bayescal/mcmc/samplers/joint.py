@@ -1,0 +1,205 @@
+"""A joint random-walk move of a few correlated coordinates, added to each Gibbs sweep.
+
+Metropolis-within-Gibbs moves one coordinate at a time. When the posterior
+of some coordinates is a narrow ridge (a wall's insulation and brick
+conductivities when only the total resistance is measured; a box's wall
+conductivity and window resistance, which both set the heat loss), each
+one-coordinate step is as short as the ridge is narrow and the chain crawls
+along it. After the coordinate updates of every sweep, the coordinates of
+the *joint block* ``J`` then also move together:
+
+    z_J' = z_J + L e,   e ~ N(0, I),   L L^T = exp(2 g) (2.38^2 / |J|) C,
+
+on the sampling scale, accepted by Metropolis with the Jacobians of the
+bounded coordinates. During burn-in ``C`` is the empirical covariance of
+``z_J`` (Haario, Saksman & Tamminen 2001) with ``1e-9 mean(diag C)`` added to
+its diagonal, estimated in two windows as Stan's warm-up does: over the second
+quarter of burn-in, then afresh over its second half (the first window still
+holds the chains' way in from dispersed starts; the second sees the target
+only). A window's estimate is used once it has ``2 |J| + 10`` sweeps; before
+the first, ``C`` is the diagonal of the coordinates' own proposal widths
+squared divided by 2.4^2 (their conditional spread).
+``g`` moves by the same Roberts–Rosenthal step as the widths towards the
+acceptance rate 0.234 (Roberts, Gelman & Gilks 1997). After burn-in ``L`` is
+frozen, so the kept draws come from a fixed reversible kernel (a composition
+of Metropolis kernels that each leave the target invariant).
+
+The same functions serve one chain (:mod:`.mwg`) and chains in lockstep
+(:mod:`.lockstep`), so that both take the same float operations and draws.
+
+References: H. Haario, E. Saksman, J. Tamminen (2001), "An adaptive Metropolis
+algorithm", Bernoulli 7(2), 223-242; G. O. Roberts, A. Gelman, W. R. Gilks
+(1997), Ann. Appl. Probab. 7(1), 110-120.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from bayescal.mcmc.samplers.base import ScalarMap
+
+FloatArray = NDArray[np.float64]
+
+#: Target acceptance rate of the joint move.
+JOINT_TARGET = 0.234
+#: Haario's scaling of the proposal covariance, ``2.38^2 / |J|``.
+HAARIO = 2.38**2
+
+
+def min_samples(n_joint: int) -> int:
+    """Burn-in sweeps collected before the empirical covariance replaces the diagonal."""
+    return 2 * n_joint + 10
+
+
+@dataclass
+class JointState:
+    """One chain's joint move: proposal factor, covariance estimate and counts.
+
+    Attributes
+    ----------
+    log_g
+        Log of the extra proposal scale ``g``.
+    n, mean, m2
+        Welford accumulators of ``z_J`` over the current window's sweeps.
+    chol
+        Current proposal factor ``L`` ``(|J|, |J|)``.
+    cov
+        The last usable covariance estimate (zeros before the first).
+    accepted
+        Accepted joint moves since the last reset.
+    """
+
+    log_g: float
+    n: int
+    mean: FloatArray
+    m2: FloatArray
+    chol: FloatArray
+    cov: FloatArray
+    accepted: int = 0
+
+    @classmethod
+    def start(cls, widths: FloatArray) -> JointState:
+        """The state before any adaptation, from the coordinates' proposal widths."""
+        k = widths.size
+        zeros = np.zeros((k, k))
+        return cls(0.0, 0, np.zeros(k), zeros, _diagonal_factor(widths, 0.0), zeros.copy())
+
+    def restart(self) -> None:
+        """Open a new estimation window (the last estimate stays in use until replaced)."""
+        k = self.mean.size
+        self.n, self.mean, self.m2 = 0, np.zeros(k), np.zeros((k, k))
+
+    def collect(self, z_joint: FloatArray) -> None:
+        """Add one burn-in sweep's ``z_J`` to the covariance estimate (Welford)."""
+        self.n += 1
+        delta = z_joint - self.mean
+        self.mean = self.mean + delta / self.n
+        self.m2 = self.m2 + np.outer(delta, z_joint - self.mean)
+
+    def adapt(self, size: int, step: float, widths: FloatArray) -> None:
+        """After a burn-in batch of ``size`` sweeps: move ``g``, rebuild ``L``."""
+        self.log_g += step if self.accepted > JOINT_TARGET * size else -step
+        k = widths.size
+        if self.n >= min_samples(k):
+            cov = self.m2 / (self.n - 1)
+            self.cov = cov + 1e-9 * float(np.mean(np.diag(cov))) * np.eye(k)
+        if np.any(self.cov):
+            try:
+                self.chol = np.asarray(
+                    np.linalg.cholesky(math.exp(2.0 * self.log_g) * HAARIO / k * self.cov),
+                    dtype=float,
+                )
+                return
+            except np.linalg.LinAlgError:
+                pass
+        self.chol = _diagonal_factor(widths, self.log_g)
+
+    def arrays(self, prefix: str = "joint_") -> dict[str, Any]:
+        """The state as arrays for a snapshot."""
+        scalars = np.array([self.log_g, self.n, self.accepted], dtype=float)
+        return {
+            f"{prefix}scalars": scalars,
+            f"{prefix}mean": self.mean,
+            f"{prefix}m2": self.m2,
+            f"{prefix}chol": self.chol,
+            f"{prefix}cov": self.cov,
+        }
+
+    @classmethod
+    def from_arrays(cls, arrays: dict[str, np.ndarray], prefix: str = "joint_") -> JointState:
+        """The state written by :meth:`arrays`."""
+        log_g, n, accepted = np.asarray(arrays[f"{prefix}scalars"], dtype=float).tolist()
+        return cls(
+            float(log_g),
+            int(n),
+            np.array(arrays[f"{prefix}mean"], dtype=float),
+            np.array(arrays[f"{prefix}m2"], dtype=float),
+            np.array(arrays[f"{prefix}chol"], dtype=float),
+            np.array(arrays[f"{prefix}cov"], dtype=float),
+            int(accepted),
+        )
+
+
+def _diagonal_factor(widths: FloatArray, log_g: float) -> FloatArray:
+    """``L`` from the coordinates' own widths (conditional spread ~ width / 2.4)."""
+    k = widths.size
+    sd = widths / 2.4 * math.sqrt(math.exp(2.0 * log_g) * HAARIO / k)
+    return np.diag(sd)
+
+
+def collecting(n_done: int, n_burn: int) -> bool:
+    """Whether the sweep after ``n_done`` adds to the covariance estimate."""
+    return n_burn // 4 <= n_done < n_burn
+
+
+def restarting(n_done: int, n_burn: int) -> bool:
+    """Whether the sweep after ``n_done`` opens the second estimation window."""
+    return n_done == n_burn // 2
+
+
+def propose(z_joint: FloatArray, chol: FloatArray, eps: FloatArray) -> FloatArray:
+    """``z_J + L e`` (one chain)."""
+    out: FloatArray = z_joint + chol @ eps
+    return out
+
+
+def log_ratio(lp_new: float, lj_new: list[float], lp: float, lj_old: list[float]) -> float:
+    """Metropolis log ratio with the Jacobians of the moved coordinates (fixed order)."""
+    return lp_new + math.fsum(lj_new) - lp - math.fsum(lj_old)
+
+
+def map_values(
+    maps: Sequence[ScalarMap | None], joint: Sequence[int], z_new: NDArray[np.float64]
+) -> tuple[list[float], list[float]] | None:
+    """Original values and log-Jacobians of one chain's joint proposal; ``None`` on overflow."""
+    values, jacobians = [], []
+    for k, i in enumerate(joint):
+        f, v = maps[i], float(z_new[k])
+        if f is None:
+            values.append(v)
+            jacobians.append(0.0)
+            continue
+        try:
+            xi, lji = f(v)
+        except OverflowError:
+            return None
+        values.append(xi)
+        jacobians.append(lji)
+    return values, jacobians
+
+
+__all__ = [
+    "JOINT_TARGET",
+    "JointState",
+    "collecting",
+    "log_ratio",
+    "map_values",
+    "min_samples",
+    "propose",
+]

@@ -1,0 +1,435 @@
+"""``bayescal compare STUDY...``: rank variants of a study on its training periods alone.
+
+Each study folder is one *variant* of the same calibration problem (another
+parameter set, other priors, another error model, the in-likelihood
+discrepancy on or off, another standardisation). :func:`compare`
+
+1. checks that every variant predicts the same measurements: the same
+   calibrated outputs and, sample for sample, the same measured values at the
+   same instants in the same training periods (else it refuses in one line);
+2. runs each study up to its ``calibrate`` stage, or reuses the stages
+   already in its output folder (:func:`bayescal.pipeline.run`);
+3. scores every training period left out in turn
+   (:mod:`bayescal.calibration.cv`: PSIS with Pareto-smoothed weights, in the
+   measurements' own units), and refits the calibration without the period
+   for those whose Pareto ``k`` exceeds 0.7, worst first, at most
+   ``max_refits`` per variant; the scores are kept in each study's output
+   folder (:mod:`bayescal.store.crossval`) and reused by a later comparison;
+4. ranks the variants by ELPD, with the difference to the best and its
+   standard error from the paired periods, and writes into ``output``:
+   ``compare.csv`` (the ranking), ``compare-periods.csv`` (every period of
+   every variant), ``compare.png`` (:func:`bayescal.report.compare.plot_comparison`)
+   and ``compare.md`` (a summary page).
+
+Only the training periods' measurements are read: the test window is left for
+the final metrics of the variant chosen.
+"""
+
+from __future__ import annotations
+
+from collections import Counter
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from bayescal.atomic import atomic_write_text
+from bayescal.calibration.cv import (
+    PeriodScores,
+    leave_period_out,
+    paired_difference,
+    refit_period,
+)
+from bayescal.config import Study, load_study
+from bayescal.config.study import OutputError
+from bayescal.errors import BayescalError, ConfigError
+from bayescal.mcmc.diagnostics import Diagnostics
+from bayescal.pipeline.keys import digest, stage_keys
+from bayescal.pipeline.run import Results, run
+from bayescal.pipeline.stages import Context, Options, prepare
+from bayescal.report.compare import comparison_markdown, plot_comparison
+from bayescal.store import crossval as crossval_store
+
+__all__ = [
+    "DEFAULT_MAX_REFITS",
+    "FILES",
+    "Comparison",
+    "Variant",
+    "compare",
+    "same_training_data",
+]
+
+Say = Callable[[str], None]
+#: Exact refits per variant when none is asked for: each costs about one calibration.
+DEFAULT_MAX_REFITS = 5
+#: What :func:`compare` writes into its output folder.
+FILES = {
+    "table": "compare.csv",
+    "periods": "compare-periods.csv",
+    "figure": "compare.png",
+    "summary": "compare.md",
+}
+
+
+@dataclass(frozen=True)
+class Variant:
+    """One study of a comparison and its leave-one-period-out scores.
+
+    Attributes
+    ----------
+    label
+        The name it goes by in the tables (its folder's name, or its path).
+    study
+        The study.
+    scores
+        Its per-period scores (physical units).
+    settings
+        ``parameters``, ``priors``, ``error_model``, ``standardise``: what
+        tells the variants apart, in words.
+    """
+
+    label: str
+    study: Study
+    scores: PeriodScores
+    settings: dict[str, str] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class Comparison:
+    """The ranking (best first), the per-period table, notes and the files written."""
+
+    variants: tuple[Variant, ...]
+    table: pd.DataFrame
+    periods: pd.DataFrame
+    notes: tuple[str, ...]
+    files: dict[str, Path]
+
+
+def _labels(studies: Sequence[Study]) -> list[str]:
+    names = [s.root.name for s in studies]
+    if len(set(names)) == len(names):
+        return names
+    return [str(s.root) for s in studies]
+
+
+def _settings(study: Study) -> dict[str, str]:
+    priors: list[str] = []
+    for name, p in study.parameters.items():
+        prior = p.prior
+        if prior.distribution != "uniform":
+            priors.append(f"{name} {prior.distribution}({prior.a:g}, {prior.b:g})")
+    errors: list[str] = []
+    for name in study.outputs.calibrate:
+        spec = study.outputs.errors.get(name, OutputError())
+        text = f"{name} {spec.model}"
+        if spec.discrepancy:
+            text += "+discrepancy"
+        if spec.sd is not None:
+            text += f" sd {spec.sd}"
+        errors.append(text)
+    return {
+        "parameters": " ".join(study.parameters),
+        "priors": "; ".join(priors) or "uniform",
+        "error_model": "; ".join(errors),
+        "standardise": study.emulator.standardise,
+    }
+
+
+def _when(times: np.ndarray, index: int) -> str:
+    return str(np.datetime_as_string(times[index], unit="m")).replace("T", " ")
+
+
+def same_training_data(a: tuple[str, Context], b: tuple[str, Context]) -> None:
+    """Refuse in one line unless ``b`` predicts exactly the training measurements of ``a``.
+
+    Raises
+    ------
+    ConfigError
+        Naming the first difference: calibrated outputs, number or length of
+        the training periods, their instants, or a measured value.
+    """
+    (la, ca), (lb, cb) = a, b
+    why = _first_difference(la, ca, lb, cb)
+    if why is not None:
+        raise ConfigError(
+            f"cannot compare {la} and {lb}: {why}",
+            hint="the variants of a comparison need the same data file, columns, training "
+            "periods and calibrated outputs",
+        )
+
+
+def _first_difference(la: str, ca: Context, lb: str, cb: Context) -> str | None:
+    oa, ob = ca.study.outputs.calibrate, cb.study.outputs.calibrate
+    if sorted(oa) != sorted(ob):
+        return f"{la} calibrates {list(oa)}, {lb} {list(ob)}"
+    ya, yb = ca.measured.layout, cb.measured.layout
+    if (ya.m_star, ya.period) != (yb.m_star, yb.period):
+        return (
+            f"{la} has {ya.m_star} training periods of {ya.period} samples, "
+            f"{lb} {yb.m_star} of {yb.period}"
+        )
+    idx_a = (ya.train_starts[:, None] + np.arange(ya.period)).ravel()
+    idx_b = (yb.train_starts[:, None] + np.arange(yb.period)).ravel()
+    ta, tb = ca.measured.times[idx_a], cb.measured.times[idx_b]
+    if not np.array_equal(ta, tb):
+        k = int(np.flatnonzero(ta != tb)[0])
+        return (
+            f"their training periods differ in time ({_when(ta, k)} UTC in {la}, "
+            f"{_when(tb, k)} UTC in {lb})"
+        )
+    for name in oa:
+        va = np.asarray(ca.measured.outputs[name], dtype=float)[idx_a]
+        vb = np.asarray(cb.measured.outputs[name], dtype=float)[idx_b]
+        same = (va == vb) | (np.isnan(va) & np.isnan(vb))
+        if not np.all(same):
+            k = int(np.flatnonzero(~same)[0])
+            return (
+                f"the measured {name} differs in the training periods (first at "
+                f"{_when(ta, k)} UTC: {va[k]:.6g} in {la}, {vb[k]:.6g} in {lb})"
+            )
+    return None
+
+
+def _bar(
+    options: Options, label: str, total: int
+) -> tuple[Callable[[int], None] | None, Callable[[], Any]]:
+    factory = options.mcmc_progress
+    if factory is None:
+        return None, lambda: None
+    return factory(label, total)
+
+
+def _calibrated(label: str, study: Study, options: Options, say: Say) -> Results:
+    try:
+        res = run(study, until="calibrate", options=options, say=lambda t: say(f"{label}: {t}"))
+    except BayescalError as exc:
+        raise type(exc)(f"{label}: running up to calibrate failed: {exc.one_line()}") from None
+    return res
+
+
+def _score(
+    label: str,
+    res: Results,
+    options: Options,
+    max_refits: int,
+    draws_per_chain: int,
+    say: Say,
+) -> PeriodScores:
+    ctx = res.context
+    em, post = res.emulator, res.posterior
+    if em is None or post is None:  # pragma: no cover - run(until="calibrate") gives both
+        raise ConfigError(f"{label}: the calibrate stage did not finish")
+    obs = em.assembled.observations
+    algebra = ctx.study.emulator.algebra
+    key = digest("leave-period-out", stage_keys(ctx)["calibrate"], draws_per_chain)
+    path = ctx.out / crossval_store.FILE
+    scores = crossval_store.load_scores(path, key)
+    if scores is None:
+        tick, close = _bar(options, f"{label}: leave-period-out", obs.y_star.shape[1])
+        try:
+            scores = leave_period_out(
+                em.emulator,
+                obs,
+                post,
+                algebra=algebra,
+                draws_per_chain=draws_per_chain,
+                callback=tick,
+            )
+        finally:
+            close()
+        crossval_store.save_scores(scores, path, key)
+    else:
+        say(f"{label}: leave-period-out scores up to date, reused ({path.name})")
+    todo = scores.refit_order()[: max(0, max_refits - int(np.sum(scores.refitted)))]
+    cal = ctx.study.calibration
+    for i in todo:
+        total = cal.chains * (cal.burn + cal.samples)
+        tick, close = _bar(options, f"{label}: refit without period {i}", total)
+        try:
+            value, refit = refit_period(
+                em.emulator,
+                obs,
+                dict(post.priors),
+                i,
+                n_chains=cal.chains,
+                n_burn=cal.burn,
+                n_draws=cal.samples,
+                seed=ctx.seed(f"leave-period-out-{i}"),
+                backend=ctx.options.chains_backend,  # type: ignore[arg-type]
+                algebra=algebra,
+                draws_per_chain=draws_per_chain,
+                callback=tick,
+            )
+        finally:
+            close()
+        scores = scores.with_refits({i: value}, _refit_note(i, refit.diagnostics))
+        crossval_store.save_scores(scores, path, key)
+    return scores
+
+
+def _refit_note(period: int, diag: Diagnostics) -> list[str]:
+    """One line for a refit whose chains raised diagnostic warnings, else none."""
+    if diag.ok:
+        return []
+    return [
+        f"the refit without period {period} has {len(diag.warnings)} diagnostic warning(s) "
+        f"(largest R-hat {np.nanmax(diag.rhat):.3f}, smallest bulk ESS "
+        f"{np.nanmin(diag.ess_bulk):.0f}); longer [calibration] chains make its value firmer"
+    ]
+
+
+def _tables(variants: Sequence[Variant], times: list[str]) -> tuple[pd.DataFrame, pd.DataFrame]:
+    ranked = sorted(variants, key=lambda v: -v.scores.elpd)
+    best = ranked[0].scores.pointwise
+    rows = []
+    for rank, v in enumerate(ranked, start=1):
+        s = v.scores
+        diff, se_diff = paired_difference(best, s.pointwise)
+        rows.append(
+            {
+                "rank": rank,
+                "variant": v.label,
+                "elpd": s.elpd,
+                "se": s.se,
+                "elpd_diff": diff,
+                "se_diff": se_diff,
+                "p_loo": s.p_loo,
+                "periods": s.n_periods,
+                "k_high": int(np.sum(s.high_k)),
+                "refits": int(np.sum(s.refitted)),
+                "psis_only": int(np.sum(s.psis_only)),
+                **v.settings,
+                "study": str(v.study.path),
+            }
+        )
+    period_rows = [
+        {
+            "variant": v.label,
+            "period": i,
+            "start": times[i],
+            "elpd_i": float(v.scores.pointwise[i]),
+            "psis": float(v.scores.psis[i]),
+            "refit": float(v.scores.refit[i]),
+            "pareto_k": float(v.scores.pareto_k[i]),
+            "lppd_i": float(v.scores.lppd[i]),
+            "method": "refit" if v.scores.refitted[i] else "psis",
+        }
+        for v in ranked
+        for i in range(v.scores.n_periods)
+    ]
+    return pd.DataFrame(rows), pd.DataFrame(period_rows)
+
+
+def _notes(variants: Sequence[Variant], max_refits: int) -> list[str]:
+    notes = []
+    for v in variants:
+        s = v.scores
+        shaky = np.flatnonzero(s.psis_only)
+        if s.refitted.any():
+            done = ", ".join(str(i) for i in np.flatnonzero(s.refitted))
+            notes.append(f"{v.label}: exact refits without period(s) {done}")
+        if shaky.size:
+            notes.append(
+                f"{v.label}: {shaky.size} period(s) ({', '.join(map(str, shaky))}) have Pareto "
+                f"k > 0.7 and no refit (--max-refits {max_refits} reached): their PSIS "
+                "estimates are unreliable"
+            )
+        notes += [f"{v.label}: {w}" for w in s.refit_warnings]
+    return notes
+
+
+def compare(
+    paths: Sequence[str | Path],
+    *,
+    output: str | Path = "compare",
+    options: Options | None = None,
+    max_refits: int = DEFAULT_MAX_REFITS,
+    draws_per_chain: int = 250,
+    say: Say | None = None,
+) -> Comparison:
+    """Rank the variants ``paths`` by leave-one-period-out ELPD and write the comparison.
+
+    Parameters
+    ----------
+    paths
+        Study files or folders, two or more.
+    output
+        Folder for ``compare.csv``, ``compare-periods.csv``, ``compare.png``
+        and ``compare.md`` (created if missing).
+    options
+        Backends and progress bars (as :func:`bayescal.pipeline.run`); the
+        refits' chains run on ``options.chains_backend``.
+    max_refits
+        Exact refits per variant at most (periods with Pareto ``k`` > 0.7,
+        worst first).
+    draws_per_chain
+        Posterior draws per chain the scores use (thinned evenly).
+    say
+        Receives one-line progress notes.
+
+    Raises
+    ------
+    ConfigError
+        Fewer than two studies, the same study twice, a study not found, or
+        variants that do not share their training measurements.
+    BayescalError
+        A study's stages up to ``calibrate`` failed (its label first).
+    """
+    note = say or (lambda _: None)
+    opts = options or Options()
+    if len(paths) < 2:
+        raise ConfigError(
+            f"compare needs at least two studies to rank, got {len(paths)}",
+            hint="give the study folders of the variants: bayescal compare A B ...",
+        )
+    if max_refits < 0 or draws_per_chain < 1:
+        raise ConfigError("max_refits must be >= 0 and draws_per_chain >= 1")
+    studies = [load_study(p) for p in paths]
+    twice = [str(p) for p, n in Counter(s.path.resolve() for s in studies).items() if n > 1]
+    if twice:
+        raise ConfigError(f"the study {twice[0]} is given more than once")
+    folder = Path(output)
+    if folder.exists() and not folder.is_dir():
+        raise ConfigError(f"{folder} exists and is not a folder", hint="give --output a folder")
+    labels = _labels(studies)
+    contexts = [(label, prepare(s, opts)) for label, s in zip(labels, studies, strict=True)]
+    for other in contexts[1:]:
+        same_training_data(contexts[0], other)
+    variants = []
+    for label, study in zip(labels, studies, strict=True):
+        res = _calibrated(label, study, opts, note)
+        scores = _score(label, res, opts, max_refits, draws_per_chain, note)
+        note(
+            f"{label}: ELPD {scores.elpd:.1f} ± {scores.se:.1f} over {scores.n_periods} periods "
+            f"({int(np.sum(scores.high_k))} with Pareto k > 0.7, {int(np.sum(scores.refitted))} "
+            "refitted)"
+        )
+        variants.append(Variant(label, study, scores, _settings(study)))
+    first = contexts[0][1].measured
+    times = [_when(first.times, int(s)) for s in first.layout.train_starts]
+    table, periods = _tables(variants, times)
+    notes = _notes(variants, max_refits)
+    files = _write(folder, table, periods, notes)
+    order = {label: k for k, label in enumerate(table["variant"])}
+    ranked = tuple(sorted(variants, key=lambda v: order[v.label]))
+    return Comparison(ranked, table, periods, tuple(notes), files)
+
+
+def _write(
+    folder: Path, table: pd.DataFrame, periods: pd.DataFrame, notes: list[str]
+) -> dict[str, Path]:
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        files = {
+            "table": atomic_write_text(folder / FILES["table"], table.to_csv(index=False)),
+            "periods": atomic_write_text(folder / FILES["periods"], periods.to_csv(index=False)),
+            "figure": plot_comparison(folder / FILES["figure"], table, periods),
+        }
+        text = comparison_markdown(table, periods, notes, FILES["figure"])
+        files["summary"] = atomic_write_text(folder / FILES["summary"], text)
+    except OSError as exc:
+        raise ConfigError(f"cannot write into {folder}: {exc.strerror or exc}") from None
+    return files

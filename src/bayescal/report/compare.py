@@ -1,0 +1,163 @@
+"""What ``bayescal compare`` shows: the ranking's figure, its verdicts and its summary page.
+
+The inputs are the two tables :mod:`bayescal.pipeline.compare` writes: the
+ranking (one row per variant, best first: ``elpd``, ``se``, ``elpd_diff``,
+``se_diff`` ...) and the per-period values (``variant``, ``period``,
+``start``, ``elpd_i``, ``pareto_k``, ``method``).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import matplotlib.pyplot as plt
+import numpy as np
+import pandas as pd
+from matplotlib.axes import Axes
+
+from bayescal.report.figures import save_figure
+
+__all__ = [
+    "SMALL_DIFFERENCE",
+    "TEST_WINDOW_TEXT",
+    "comparison_markdown",
+    "plot_comparison",
+    "verdict",
+]
+
+#: ELPD differences below this many nats are small whatever their SE (Sivula et al. 2022).
+SMALL_DIFFERENCE = 4.0
+
+TEST_WINDOW_TEXT = (
+    "Only the measurements of the training periods enter this comparison: each period is "
+    "left out in turn and predicted from the calibration on the others. The test window is "
+    "read by none of it; it is read only for the final metrics of the chosen variant "
+    "(`bayescal run`, the report)."
+)
+
+
+def verdict(diff: float, se_diff: float) -> str:
+    """How to read an ELPD difference to the best variant (``diff >= 0``) and its SE."""
+    if not np.isfinite(diff) or diff == 0.0:
+        return "best"
+    ratio = diff / se_diff if se_diff > 0.0 else np.inf
+    if diff < SMALL_DIFFERENCE or ratio < 2.0:
+        return f"not clearly worse ({diff:.1f} ± {se_diff:.1f})"
+    return f"worse by {diff:.1f} ± {se_diff:.1f} ({ratio:.1f} SE)"
+
+
+def plot_comparison(path: Path, table: pd.DataFrame, periods: pd.DataFrame) -> Path:
+    """ELPD ± SE per variant (and the difference to the best ± its SE); per-period differences.
+
+    Left: each variant's ELPD with its standard error (black) and, below it,
+    its difference to the best with the SE of the paired difference (grey).
+    Right: ``elpd_i(variant) - elpd_i(best)`` per training period; filled
+    squares are periods scored by an exact refit, open circles PSIS estimates
+    whose Pareto ``k`` exceeds 0.7 (unreliable).
+    """
+    order = list(table["variant"])
+    n = len(order)
+    fig, (left, right) = plt.subplots(
+        1, 2, figsize=(11.0, max(3.0, 1.2 + 0.55 * n)), gridspec_kw={"width_ratios": [1.0, 1.4]}
+    )
+    y = np.arange(n)[::-1].astype(float)
+    best = float(table["elpd"].iloc[0])
+    left.errorbar(table["elpd"], y, xerr=table["se"], fmt="o", color="black", capsize=3)
+    others = table.iloc[1:]
+    if len(others):
+        left.errorbar(
+            best - others["elpd_diff"],
+            y[1:] - 0.25,
+            xerr=others["se_diff"],
+            fmt="^",
+            color="0.55",
+            capsize=3,
+        )
+    left.axvline(best, color="0.3", ls="--", lw=0.8)
+    left.set_yticks(y, order)
+    left.set_ylim(-0.7, n - 0.3)
+    left.set_xlabel("ELPD: leave-one-period-out log density [nats]")
+    left.set_title("higher is better", fontsize=9)
+    _plot_periods(right, periods, order)
+    fig.tight_layout()
+    return save_figure(fig, path)
+
+
+def _plot_periods(ax: Axes, periods: pd.DataFrame, order: list[str]) -> None:
+    wide = periods.pivot(index="period", columns="variant", values="elpd_i")
+    method = periods.pivot(index="period", columns="variant", values="method")
+    high = periods.pivot(index="period", columns="variant", values="pareto_k") > 0.7
+    x = wide.index.to_numpy()
+    base = wide[order[0]].to_numpy()
+    for k, name in enumerate(order[1:]):
+        diff = wide[name].to_numpy() - base
+        colour = f"C{k}"
+        ax.plot(x, diff, "-", color=colour, lw=0.8, label=name)
+        refit = (method[name] == "refit").to_numpy()
+        shaky = high[name].to_numpy() & ~refit
+        plain = ~refit & ~shaky
+        ax.plot(x[plain], diff[plain], ".", color=colour)
+        ax.plot(x[refit], diff[refit], "s", color=colour, ms=5)
+        ax.plot(x[shaky], diff[shaky], "o", mfc="none", color=colour, ms=7)
+    ax.axhline(0.0, color="black", lw=0.8)
+    ax.set_xlabel("training period")
+    ax.set_ylabel("elpd_i − elpd_i of the best [nats]")
+    ax.set_title(f"per period, against {order[0]} (■ refit, ○ k > 0.7)", fontsize=9)
+    if len(order) > 1:
+        ax.legend(fontsize=8)
+
+
+def _cell(value: object) -> str:
+    if isinstance(value, float | np.floating):
+        return f"{float(value):.1f}"
+    return str(value).replace("|", "\\|")
+
+
+def comparison_markdown(
+    table: pd.DataFrame, periods: pd.DataFrame, notes: list[str], figure: str | None
+) -> str:
+    """A short Markdown page: the ranking table, verdicts, notes and the figure."""
+    columns = {
+        "rank": "rank",
+        "variant": "variant",
+        "elpd": "ELPD",
+        "se": "SE",
+        "elpd_diff": "ELPD diff",
+        "se_diff": "SE diff",
+        "p_loo": "p_loo",
+        "k_high": "periods k > 0.7",
+        "refits": "refits",
+        "parameters": "parameters",
+        "priors": "priors",
+        "error_model": "error model",
+        "standardise": "standardise",
+    }
+    shown = [c for c in columns if c in table.columns]
+    lines = [
+        "# Leave-one-period-out comparison",
+        "",
+        f"{len(table)} variants ranked by ELPD, the expected log density of a left-out "
+        f"training period's measurements in their own units (nats, higher is better), summed "
+        f"over the {int(table['periods'].iloc[0])} training periods. ELPD diff is the "
+        "difference to the best, SE diff its standard error from the paired periods.",
+        "",
+        "| " + " | ".join(columns[c] for c in shown) + " |",
+        "|" + "|".join("---" for _ in shown) + "|",
+    ]
+    for _, row in table.iterrows():
+        lines.append("| " + " | ".join(_cell(row[c]) for c in shown) + " |")
+    lines += ["", "## Reading it", ""]
+    for _, row in table.iterrows():
+        lines.append(f"- **{row['variant']}**: {verdict(row['elpd_diff'], row['se_diff'])}")
+    lines += [
+        "",
+        f"A difference counts when it exceeds both {SMALL_DIFFERENCE:g} nats and twice its "
+        "SE; with few training periods the SE itself is rough.",
+        "",
+        TEST_WINDOW_TEXT,
+    ]
+    if notes:
+        lines += ["", "## Notes", ""] + [f"- {n}" for n in notes]
+    if figure:
+        lines += ["", f"![ELPD per variant and per period]({figure})"]
+    return "\n".join(lines) + "\n"

@@ -1,0 +1,129 @@
+"""bayescal compare: ranking two variants of a tiny study, and its one-line errors."""
+
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+from click.testing import CliRunner, Result
+
+from bayescal.cli import main
+from compare_study import wall_data, write_variant
+
+
+@pytest.fixture(scope="module")
+def variants(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path, Path]:
+    """Two variants of the virtual wall with AR(1) noise: white and AR(1) error models."""
+    root = tmp_path_factory.mktemp("compare")
+    data = wall_data()
+    return (
+        root,
+        write_variant(root / "white", data, "white"),
+        write_variant(root / "ar1", data, "ar1"),
+    )
+
+
+@pytest.fixture(scope="module")
+def ranked(variants: tuple[Path, Path, Path]) -> tuple[Result, Path]:
+    root, white, ar1 = variants
+    out = root / "ranking"
+    args = ["compare", str(white), str(ar1), "--output", str(out), "--draws", "60"]
+    result = CliRunner().invoke(main, [*args, "--max-refits", "1", "--quiet"])
+    return result, out
+
+
+def test_ar1_errors_win_on_ar1_noise(ranked: tuple[Result, Path]) -> None:
+    result, out = ranked
+    assert result.exit_code == 0, result.output
+    table = pd.read_csv(out / "compare.csv")
+    assert list(table["variant"]) == ["ar1", "white"]
+    assert list(table["rank"]) == [1, 2]
+    best, other = table.iloc[0], table.iloc[1]
+    assert best["elpd_diff"] == 0.0
+    assert other["elpd_diff"] == pytest.approx(best["elpd"] - other["elpd"])
+    # The noise is AR(1) with phi = 0.9: white errors must lose by more than 2 SE.
+    assert other["elpd_diff"] > 2.0 * other["se_diff"] > 0.0
+    assert other["error_model"] == "heat_flux_in white"
+    assert (table["refits"] <= 1).all()
+    assert (table["psis_only"] == table["k_high"] - table["refits"]).all()
+    periods = pd.read_csv(out / "compare-periods.csv")
+    assert len(periods) == 2 * int(best["periods"]) == 12
+    for name, group in periods.groupby("variant"):
+        row = table.set_index("variant").loc[name]
+        assert group["elpd_i"].sum() == pytest.approx(row["elpd"])
+        assert int((group["method"] == "refit").sum()) == row["refits"]
+    assert (out / "compare.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    summary = (out / "compare.md").read_text(encoding="utf-8")
+    assert "| 1 | ar1 |" in summary
+    assert "The test window is read by none of it" in summary
+    text = result.output
+    assert "ar1: best" in text
+    assert "white: worse by" in text
+    assert f"wrote {out / 'compare.csv'}" in text
+
+
+def test_a_second_comparison_reuses_the_scores(
+    variants: tuple[Path, Path, Path], ranked: tuple[Result, Path]
+) -> None:
+    root, white, ar1 = variants
+    first = pd.read_csv(ranked[1] / "compare.csv")
+    args = ["compare", str(ar1), str(white), "--output", str(root / "again"), "--draws", "60"]
+    result = CliRunner().invoke(main, [*args, "--max-refits", "1"])
+    assert result.exit_code == 0, result.output
+    assert "white: calibrate: up to date, reused" in result.output
+    assert "white: leave-period-out scores up to date, reused" in result.output
+    again = pd.read_csv(root / "again" / "compare.csv")
+    np.testing.assert_array_equal(again["elpd"], first["elpd"])
+
+
+def _one_line_error(result: Result, *needles: str) -> None:
+    assert result.exit_code == 2, result.output
+    assert result.output.startswith("error: ")
+    assert result.output.count("\n") == 1
+    assert "Traceback" not in result.output
+    for needle in needles:
+        assert needle in result.output
+
+
+def test_fewer_than_two_studies(variants: tuple[Path, Path, Path]) -> None:
+    _, white, _ = variants
+    result = CliRunner().invoke(main, ["compare", str(white)])
+    _one_line_error(result, "at least two studies", "got 1")
+    _one_line_error(CliRunner().invoke(main, ["compare"]), "got 0")
+    twice = CliRunner().invoke(main, ["compare", str(white), str(white / "study.toml")])
+    _one_line_error(twice, "given more than once")
+
+
+def test_study_not_found(variants: tuple[Path, Path, Path]) -> None:
+    root, white, _ = variants
+    result = CliRunner().invoke(main, ["compare", str(white), str(root / "nowhere")])
+    _one_line_error(result, "nowhere", "file not found")
+
+
+def test_different_measurements_are_refused(variants: tuple[Path, Path, Path]) -> None:
+    root, white, _ = variants
+    data = wall_data()
+    data.loc[100, "q_si"] += 0.5  # a training sample (warm-up is the first 48)
+    other = write_variant(root / "edited", data, "ar1")
+    result = CliRunner().invoke(main, ["compare", str(white), str(other)])
+    _one_line_error(result, "cannot compare white and edited", "measured heat_flux_in differs")
+    shorter = write_variant(root / "shorter", wall_data(days=5), "white")
+    result = CliRunner().invoke(main, ["compare", str(white), str(shorter)])
+    _one_line_error(result, "6 training periods of 48 samples, shorter 5 of 48")
+    assert not (root / "edited" / "out").exists()  # refused before running anything
+
+
+def test_a_failing_study_is_named(variants: tuple[Path, Path, Path], tmp_path: Path) -> None:
+    _, white, _ = variants
+    broken = tmp_path / "broken"
+    shutil.copytree(white, broken, ignore=shutil.ignore_patterns("out"))
+    path = broken / "study.toml"
+    text = path.read_text(encoding="utf-8")
+    # Conductivities below zero: every simulator run fails.
+    text = text.replace("nominal = 0.12", "nominal = -0.15")
+    path.write_text(text.replace("lower = 0.08, upper = 0.16", "lower = -0.2, upper = -0.1"))
+    result = CliRunner().invoke(main, ["compare", str(broken), str(white), "-q"])
+    _one_line_error(result, "broken: running up to calibrate failed")

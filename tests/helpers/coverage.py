@@ -1,0 +1,176 @@
+"""Known-truth calibrations of the virtual wall, scored for coverage (issue 15).
+
+One *case* draws a truth inside the paper's priors, makes the virtual
+experiment (white or AR(1) measurement noise; the measuring wall may have a
+layer the calibrated model lacks), assembles it with one scale per output,
+trains the emulator, calibrates with a chosen error model and predicts by
+re-running the simulator at posterior draws. It returns whether each 95 %
+parameter interval covers the truth and the coverage of the 95 % and 50 %
+prediction bands of the measurements on the training and test windows.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from bayescal.calibration.posterior import Posterior, calibrate
+from bayescal.emulator.assemble import Assembled, NoiseSpec, assemble
+from bayescal.emulator.noise import ErrorModel
+from bayescal.emulator.training import train
+from bayescal.pipeline.predict import simulator_band
+from bayescal.simulators.wall import MultilayerWall
+from virtual_wall import PRIORS, paper_wall, random_truth, simulate, virtual_experiment
+
+#: Settings of one case (reduced from the example's: the truth is sharp after ~2000 draws).
+TRAIN_DAYS, TEST_DAYS = 20, 4
+BAND_RUNS = 40
+
+
+@dataclass(frozen=True)
+class CaseResult:
+    """Coverage of one known-truth calibration."""
+
+    truth: dict[str, float]
+    covered: dict[str, bool]
+    derived_covered: dict[str, bool]  # the wall's R_wall, U_value, areal heat capacity
+    band95: dict[str, float]  # window -> share of measured samples inside the 95 % band
+    band50: dict[str, float]
+    posterior: Posterior
+
+
+def windows(a: Assembled) -> dict[str, np.ndarray]:
+    """Masks ``(n_total,)`` of the training periods and the test window."""
+    layout = a.layout
+    train = np.zeros(layout.n_total, dtype=bool)
+    for start in layout.train_starts:
+        train[start : start + layout.period] = True
+    test = np.zeros(layout.n_total, dtype=bool)
+    test[layout.test_begin :] = True
+    return {"train": train, "test": test}
+
+
+def band_coverage(
+    a: Assembled, post: Posterior, measured: dict[str, np.ndarray], runs: dict[str, np.ndarray],
+    pick: np.ndarray,
+) -> dict[str, dict[str, tuple[float, float]]]:  # fmt: skip
+    """Per output and window, the shares of measured samples inside the 95 % and
+    50 % bands built from simulator ``runs`` at the posterior draws ``pick``."""
+    lam = post.lam_stars.reshape(-1, post.lam_stars.shape[-1])
+    band = simulator_band(a, runs, lam[pick], measured=measured)
+    out: dict[str, dict[str, tuple[float, float]]] = {}
+    for name, y_all in measured.items():
+        out[name] = {}
+        for window, mask in windows(a).items():
+            y = y_all[mask]
+            inside95 = (y >= band.lower[name][mask]) & (y <= band.upper[name][mask])
+            inside50 = (y >= band.lower50[name][mask]) & (y <= band.upper50[name][mask])
+            out[name][window] = (float(np.mean(inside95)), float(np.mean(inside50)))
+    return out
+
+
+def draw_picks(post: Posterior, n: int = BAND_RUNS) -> np.ndarray:
+    """``n`` evenly spaced indices into the flattened posterior draws."""
+    total = post.draws.shape[0] * post.draws.shape[1]
+    return np.unique(np.linspace(0, total - 1, n).astype(int))
+
+
+def _band_coverage(
+    a: Assembled, post: Posterior, measured: np.ndarray, boundary: dict[str, np.ndarray]
+) -> tuple[dict[str, float], dict[str, float]]:
+    theta = post.draws.reshape(-1, len(post.names))
+    pick = draw_picks(post)
+    runs = np.array(
+        [simulate(boundary, dict(zip(post.names, row, strict=True))) for row in theta[pick]]
+    )
+    cover = band_coverage(a, post, {"heat_flux_in": measured}, {"heat_flux_in": runs}, pick)
+    flux = cover["heat_flux_in"]
+    return {w: v[0] for w, v in flux.items()}, {w: v[1] for w, v in flux.items()}
+
+
+def run_case(
+    seed: int,
+    *,
+    error_model: ErrorModel = "white",
+    noise_phi: float = 0.0,
+    true_wall: MultilayerWall | None = None,
+    means: bool = False,
+    discrepancy: bool = False,
+    n_burn: int = 1000,
+    n_draws: int = 1000,
+) -> CaseResult:
+    """One known-truth calibration (see the module docstring)."""
+    rng = np.random.default_rng([seed, 15])
+    truth = random_truth(rng)
+    ve = virtual_experiment(
+        seed=seed,
+        truth=truth,
+        periods=TRAIN_DAYS,
+        test_days=TEST_DAYS,
+        noise_phi=noise_phi,
+        true_wall=true_wall,
+        means=means,
+    )
+    a = assemble(
+        ve.design,
+        ve.runs,
+        ve.measured,
+        ve.boundary,
+        ve.layout,
+        variance=0.999,
+        history=1,
+        scale="output",
+        noise={"heat_flux_in": NoiseSpec(error_model, discrepancy=discrepancy)},
+    )
+    em = train(a, n_burn=300, n_draws=100, n_chains=1, seed=seed)
+    post = calibrate(
+        em,
+        a,
+        n_chains=4,
+        n_burn=n_burn,
+        n_draws=n_draws,
+        seed=seed,
+        backend="processes",
+        observations=a.observations,
+    )
+    lower, upper = post.interval(0.95)
+    covered = {
+        n: bool(lo <= truth[n] <= hi) for n, lo, hi in zip(post.names, lower, upper, strict=True)
+    }
+    band95, band50 = _band_coverage(a, post, ve.measured["heat_flux_in"], ve.boundary)
+    return CaseResult(
+        truth, covered, _derived_covered(post, truth, true_wall), band95, band50, post
+    )
+
+
+def _derived_covered(
+    post: Posterior, truth: dict[str, float], true_wall: MultilayerWall | None
+) -> dict[str, bool]:
+    """Whether the 95 % intervals of the calibrated wall's R, U and heat capacity
+    cover those of the wall that made the measurements."""
+    wall = paper_wall()
+    flat = post.draws.reshape(-1, len(post.names))
+    rows = [wall.derived(dict(zip(post.names, map(float, r), strict=True))) for r in flat]
+    actual = (true_wall or wall).derived(truth)
+    out = {}
+    for name, value in actual.items():
+        column = np.array([r[name] for r in rows])
+        lo, hi = np.quantile(column, [0.025, 0.975])
+        out[name] = bool(lo <= value <= hi)
+    return out
+
+
+def summary(results: list[CaseResult]) -> dict[str, float]:
+    """Parameter coverage (share of intervals covering) and mean band coverages."""
+    hits = [c for r in results for c in r.covered.values()]
+    out = {"parameters": float(np.mean(hits)), "intervals": float(len(hits))}
+    for name in results[0].derived_covered:
+        out[name] = float(np.mean([r.derived_covered[name] for r in results]))
+    for window in ("train", "test"):
+        out[f"band95_{window}"] = float(np.mean([r.band95[window] for r in results]))
+        out[f"band50_{window}"] = float(np.mean([r.band50[window] for r in results]))
+    return out
+
+
+__all__ = ["PRIORS", "CaseResult", "band_coverage", "draw_picks", "run_case", "summary", "windows"]
