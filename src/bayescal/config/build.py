@@ -16,7 +16,11 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-from bayescal.config.energyplus import EnergyPlusSection, parse_energyplus_target
+from bayescal.config.energyplus import (
+    EnergyPlusOutput,
+    EnergyPlusSection,
+    parse_energyplus_target,
+)
 from bayescal.config.external import CommandSection, FmuSection
 from bayescal.config.simulators import BoxSimulator, WallSimulator
 from bayescal.config.study import Study
@@ -96,15 +100,34 @@ def _energyplus(section: EnergyPlusSection, study: Study) -> Simulator:
             schedules={
                 n: ScheduleInput(s.schedule, s.lead_steps) for n, s in section.schedules.items()
             },
-            outputs={n: (o.variable, o.key, o.scale) for n, o in section.outputs.items()},
+            outputs={n: _energyplus_output(n, o, study) for n, o in section.outputs.items()},
             weather=section.weather,
             timesteps_per_hour=section.timesteps_per_hour,
             algorithm=section.algorithm,
             warmup_days=section.warmup_days,
             timeout=section.timeout,
+            workdir=study.root / study.study.output_dir / "energyplus"
+            if section.keep_outputs
+            else None,
+            keep_outputs=section.keep_outputs,
         )
     except SimulatorError as exc:
         raise _energyplus_problem(section, study) or exc from None
+
+
+def _energyplus_output(name: str, output: EnergyPlusOutput, study: Study) -> dict[str, Any]:
+    """One ``[simulator.outputs.<name>]`` as the adapter takes it, aggregated like its data."""
+    column = study.data.columns.get(name)
+    spec: dict[str, Any] = {
+        "scale": output.scale,
+        "aggregate": column.aggregate if column is not None else "point",
+    }
+    if output.meter is not None:
+        spec["meter"] = output.meter
+        spec["aggregate"] = "sum" if spec["aggregate"] == "point" else spec["aggregate"]
+    else:
+        spec |= {"variable": output.variable, "key": output.key}
+    return spec
 
 
 def _require_file(path: Path, key: str, what: str) -> None:

@@ -92,15 +92,41 @@ class EnergyPlusSchedule(Section):
 
 
 class EnergyPlusOutput(Section):
-    """``[simulator.outputs.<name>]`` (energyplus): a report variable returned as a series."""
+    """``[simulator.outputs.<name>]`` (energyplus): a report variable or a meter returned as
+    a series (give ``variable`` and ``key``, or ``meter``)."""
 
-    variable: str = field_doc(
-        "Report variable name.", "Surface Inside Face Conduction Heat Transfer Rate per Area"
+    variable: str | None = field_doc(
+        "Report variable name.",
+        "Surface Inside Face Conduction Heat Transfer Rate per Area",
+        "Zone Mean Air Temperature",
+        default=None,
     )
-    key: str = field_doc("Key value (surface, zone... name), case-insensitive.", "Wall")
+    key: str | None = field_doc(
+        "Key value (surface, zone... name) of the variable, case-insensitive.",
+        "Wall",
+        "Core_ZN",
+        default=None,
+    )
+    meter: str | None = field_doc(
+        "Meter name (an energy per time step, J): the output's [data.columns] entry "
+        "says aggregate = 'sum'.",
+        "Electricity:Facility",
+        "NaturalGas:Facility",
+        default=None,
+    )
     scale: float = field_doc(
         "Factor applied to the values (-1 flips a sign convention). [-]", -1.0, default=1.0
     )
+
+    @model_validator(mode="after")
+    def _one_source(self) -> EnergyPlusOutput:
+        if (self.meter is None) == (self.variable is None):
+            raise ValueError("give either variable (with key) or meter")
+        if self.variable is not None and self.key is None:
+            raise ValueError(f"variable {self.variable!r} needs its key (a zone, surface... name)")
+        if self.meter is not None and self.key is not None:
+            raise ValueError("a meter has no key; remove key")
+        return self
 
 
 class EnergyPlusSection(SimulatorBase):
@@ -164,6 +190,13 @@ class EnergyPlusSection(SimulatorBase):
     )
     timeout: float = field_doc(
         "A run taking longer is stopped and fails. [s]", 600.0, default=600.0, gt=0
+    )
+    keep_outputs: bool = field_doc(
+        "Keep every run's folder (model, EnergyPlus's output files) in OUTPUT_DIR/energyplus "
+        "instead of deleting it once the requested series are read (debugging; a "
+        "reference building's files take about 2 MB a run).",
+        True,
+        default=False,
     )
 
     @field_validator("model")

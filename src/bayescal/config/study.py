@@ -375,7 +375,7 @@ class Study(Section):
     @model_validator(mode="after")
     def _cross_checks(self) -> Study:
         problems = _target_problems(self) + _output_problems(self) + _period_problems(self)
-        problems += _sampler_problems(self)
+        problems += _sampler_problems(self) + _aggregate_problems(self)
         if self.design.runs < len(self.parameters) + 2:
             problems.append(
                 f"design.runs: {self.design.runs} runs for {len(self.parameters)} parameters; "
@@ -476,6 +476,32 @@ def _sensor_problems(study: Study, key: str, unit: str, target: str) -> list[str
             f"{key}.unit: the offset of {output!r} takes its unit ({quantity.unit}), got {unit!r}"
         ]
     return []
+
+
+def _aggregate_problems(study: Study) -> list[str]:
+    """Interval outputs (``aggregate`` 'sum' or 'mean') need a simulator that reports intervals."""
+    problems = []
+    sim = study.simulator
+    outputs = getattr(sim, "outputs", None)
+    for name in study.outputs.calibrate:
+        column = study.data.columns.get(name)
+        if column is None:
+            continue
+        how = column.aggregate
+        if how != "point" and sim.type in ("wall", "box"):
+            problems.append(
+                f"data.columns.{name}.aggregate: the {sim.type} simulator gives values at the "
+                f"clock instants, not {'totals' if how == 'sum' else 'means'} over its "
+                "intervals; use aggregate = 'point' or a simulator that reports intervals "
+                "(energyplus; a command or an FMU that returns interval values)"
+            )
+        meter = getattr(outputs.get(name), "meter", None) if isinstance(outputs, dict) else None
+        if meter is not None and how != "sum":
+            problems.append(
+                f"data.columns.{name}.aggregate: simulator.outputs.{name} is the meter "
+                f"{meter!r} (energy per time step); set aggregate = 'sum', got {how!r}"
+            )
+    return problems
 
 
 def _output_problems(study: Study) -> list[str]:

@@ -21,6 +21,7 @@ import pandas as pd
 
 from bayescal.clock import format_duration
 from bayescal.data.align import Gap, align, fill_gaps
+from bayescal.data.meters import replace_interval_columns
 from bayescal.data.readers import (
     epw_field,
     read_csv,
@@ -285,14 +286,17 @@ def load_measured(study: Study) -> MeasuredData:
     sources = list(dict.fromkeys(spec.source for spec in data.columns.values()))
     raw, zone = _read(data, sources)
     step = pd.Timedelta(data.step)
+    converted = _convert(raw, data)
     frame = align(
-        _convert(raw, data),
+        converted,
         step,
         zone=zone,
         start=None if data.start is None else pd.Timestamp(data.start),
         end=None if data.end is None else pd.Timestamp(data.end),
         source=source,
     )
+    aggregates = {name: spec.aggregate for name, spec in data.columns.items()}
+    frame = replace_interval_columns(frame, converted, aggregates, step, source=source)
     frame, gaps = fill_gaps(frame, pd.Timedelta(data.max_gap_interpolate))
     outputs = {name: frame[name].to_numpy(dtype=float) for name in study.outputs.calibrate}
     _check_outputs(outputs, data, source)

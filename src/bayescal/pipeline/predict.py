@@ -36,7 +36,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any, Protocol
+from typing import Any, Literal, Protocol
 
 import numpy as np
 import pandas as pd
@@ -52,6 +52,7 @@ from bayescal.metrics import (
     fit_metrics,
     meets_guideline14,
     metric_columns,
+    monthly_metrics,
 )
 from bayescal.periods import PeriodLayout
 
@@ -360,6 +361,12 @@ def _window_mask(ds: xr.Dataset, window: str) -> np.ndarray:
     return np.asarray(ds["window"].values == window)
 
 
+def _monthly_how(output: str) -> Literal["sum", "mean"]:
+    """Monthly totals for energies (meters), monthly means for anything else."""
+    quantity = GLOSSARY.get(output)
+    return "sum" if quantity is not None and quantity.dimension == "energy" else "mean"
+
+
 def metrics_table(ds: xr.Dataset) -> pd.DataFrame:
     """Fit metrics per output, model and window (see the module docstring)."""
     rows = []
@@ -383,6 +390,8 @@ def metrics_table(ds: xr.Dataset) -> pd.DataFrame:
                     inside = (obs[mask] >= lo) & (obs[mask] <= hi)
                     m["coverage95"] = float(np.mean(inside[ok])) if ok.any() else float("nan")
                 m["guideline14"] = meets_guideline14(m["cv_rmse"], m["nmbe"])
+                times = ds["time"].values[mask]
+                m |= monthly_metrics(times, sim[mask], obs[mask], how=_monthly_how(o))
                 rows.append({"output": o, "model": model, "window": window} | m)
     columns = [*KEY_COLUMNS, *(c.name for c in metric_columns("csv"))]
     return pd.DataFrame(rows, columns=columns)
