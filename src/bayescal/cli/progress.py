@@ -3,6 +3,7 @@
 * :func:`study_summary` -- what ``bayescal validate`` prints;
 * :func:`metrics_text` -- the metrics table of ``bayescal simulate``;
 * :func:`describe` -- what ``bayescal run`` and ``bayescal show`` print;
+* :func:`screening_text` -- the Morris ranks and proposal of ``bayescal screen``;
 * :func:`progress_options` -- the progress bars of the simulations and the
   MCMC stages (tqdm), as :class:`bayescal.pipeline.Options` takes them.
 
@@ -11,16 +12,26 @@ The metric columns of every table come from :func:`bayescal.metrics.metric_colum
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from typing import TYPE_CHECKING, Any
+
+import numpy as np
 
 from bayescal.metrics import KEY_COLUMNS, Metrics, metric_columns
 from bayescal.runner import Progress
 
 if TYPE_CHECKING:
     from bayescal.pipeline import Results
+    from bayescal.screening import MorrisIndices, Proposal
 
-__all__ = ["describe", "mcmc_bar", "metrics_text", "progress_options", "study_summary"]
+__all__ = [
+    "describe",
+    "mcmc_bar",
+    "metrics_text",
+    "progress_options",
+    "screening_text",
+    "study_summary",
+]
 
 Tick = Callable[[int], None]
 
@@ -30,12 +41,15 @@ def study_summary(study: Any, measured: Any) -> str:
     from bayescal.data.align import format_duration
 
     lines = [f"study {study.study.name!r} ({study.path})", _simulator_line(study.simulator)]
-    lines.append(f"parameters ({len(study.parameters)}):")
+    candidates = len(study.candidates)
+    held = f", {candidates} screening candidates held at nominal" if candidates else ""
+    lines.append(f"parameters ({len(study.parameters)}{held}):")
     for name, p in study.parameters.items():
         prior = p.prior
         shape = f", a={prior.a:g}, b={prior.b:g}" if prior.distribution == "beta" else ""
+        mark = " (screen)" if p.screen else ""
         lines.append(
-            f"  {name} [{p.unit}]: nominal {p.nominal:g}, {prior.distribution}"
+            f"  {name}{mark} [{p.unit}]: nominal {p.nominal:g}, {prior.distribution}"
             f"({prior.lower:g}, {prior.upper:g}{shape}) -> {', '.join(p.targets)}"
         )
     step = study.data.step
@@ -191,3 +205,21 @@ def simulation_bar(total: int, desc: str = "simulations") -> tuple[Progress, Cal
         bar.set_postfix(failed=failed, refresh=True)
 
     return progress, bar.close
+
+
+def screening_text(indices: Sequence[MorrisIndices], proposal: Proposal) -> str:
+    """The Morris ranks of each output (mu* with its 95 % interval) and the proposal."""
+    lines = []
+    for ix in indices:
+        lines.append(f"{ix.output}: mu* [per prior range] ({ix.trajectories} trajectories)")
+        for j in np.argsort(-ix.mu_star, kind="stable"):
+            lines.append(
+                f"  {int(ix.ranks[j]):3d}  {ix.names[j]:<24s} {ix.mu_star[j]:11.4g} "
+                f"± {ix.mu_star_conf[j]:<10.3g} sigma {ix.sigma[j]:.3g}"
+            )
+    cap = "" if proposal.max_parameters is None else f", at most {proposal.max_parameters}"
+    lines.append(
+        f"proposed (mu* >= {proposal.threshold:g} × the largest for an output{cap}): "
+        + (", ".join(proposal.selected) or "none")
+    )
+    return "\n".join(lines)

@@ -29,7 +29,7 @@ from bayescal.errors import BayescalError, ConfigError, SimulatorError
 from bayescal.simulators.base import Simulator
 from bayescal.simulators.energyplus_model import energyplus_field_key
 from bayescal.simulators.fvm import Layer
-from bayescal.simulators.wrappers import SensorModel, TargetedSimulator
+from bayescal.simulators.wrappers import FixedParameters, SensorModel, TargetedSimulator
 
 __all__ = ["build_simulator", "nominal_parameters"]
 
@@ -275,8 +275,12 @@ def _fmu_key(section: FmuSection, study: Study) -> str | None:
     return next((key for key, var in references if var not in names), None)
 
 
-def build_simulator(study: Study) -> Simulator:
+def build_simulator(study: Study, *, screening: bool = False) -> Simulator:
     """The simulator of ``study``, taking the study's parameter names.
+
+    Screening candidates (``screen = true``) are held at their nominal values
+    unless ``screening`` is true (then every parameter is free: ``bayescal
+    screen`` and ``bayescal simulate``).
 
     Files the study names (EnergyPlus model, templates, program, FMU) are
     read here, so problems in them surface now, before any run.
@@ -303,10 +307,15 @@ def build_simulator(study: Study) -> Simulator:
     }
     sensors = {name: targets for name, targets in sensors.items() if targets}
     if not sensors:
-        return _build_physics(study)
-    physics = {name: p for name, p in study.parameters.items() if name not in sensors}
-    inner = _build_physics(study.model_copy(update={"parameters": physics}))
-    return SensorModel(inner, tuple(study.parameters), sensors)
+        simulator = _build_physics(study)
+    else:
+        physics = {name: p for name, p in study.parameters.items() if name not in sensors}
+        inner = _build_physics(study.model_copy(update={"parameters": physics}))
+        simulator = SensorModel(inner, tuple(study.parameters), sensors)
+    if screening or not study.candidates:
+        return simulator
+    fixed = {name: study.parameters[name].nominal for name in study.candidates}
+    return FixedParameters(simulator, fixed)
 
 
 def _build_physics(study: Study) -> Simulator:

@@ -10,8 +10,8 @@ its key path, the value received and what was expected, on one line
 This module holds :class:`Study`, the small sections (``[study]``,
 ``[outputs]``, ``[periods]``, ``[design]``, ``[emulator]``,
 ``[calibration]``, ``[discrepancy]``, ``[predict]``, ``[runner]``) and the
-checks across sections; ``[data]``, ``[parameters]`` and ``[simulator]`` have
-modules of their own in :mod:`bayescal.config`.
+checks across sections; ``[data]``, ``[parameters]``, ``[simulator]`` and
+``[screening]`` have modules of their own in :mod:`bayescal.config`.
 """
 
 from __future__ import annotations
@@ -45,6 +45,7 @@ from bayescal.config.base import (
 from bayescal.config.data import DataSection
 from bayescal.config.messages import format_errors
 from bayescal.config.parameters import Parameter
+from bayescal.config.screening import ScreeningSection
 from bayescal.config.simulators import SimulatorSection
 from bayescal.config.targets import KIND_UNITS, SENSOR_PREFIX, normal_unit, parse_sensor_target
 from bayescal.errors import ConfigError
@@ -339,6 +340,9 @@ class Study(Section):
     )
     predict: PredictSection = field_doc("Predictions with bands.", default_factory=PredictSection)
     runner: RunnerSection = field_doc("Simulation runner.", default_factory=RunnerSection)
+    screening: ScreeningSection = field_doc(
+        "Morris screening (bayescal screen).", default_factory=ScreeningSection
+    )
 
     _root: Path = PrivateAttr(default_factory=Path.cwd)
     _path: Path | None = PrivateAttr(default=None)
@@ -358,8 +362,23 @@ class Study(Section):
         """Mapped columns that are not calibrated outputs."""
         return tuple(n for n in self.data.columns if n not in self.outputs.calibrate)
 
+    @property
+    def calibrated(self) -> tuple[str, ...]:
+        """Names of the parameters calibrated (those without ``screen = true``), in order."""
+        return tuple(name for name, p in self.parameters.items() if not p.screen)
+
+    @property
+    def candidates(self) -> tuple[str, ...]:
+        """Names of the screening candidates (``screen = true``), held at nominal by ``run``."""
+        return tuple(name for name, p in self.parameters.items() if p.screen)
+
     def priors(self) -> dict[str, Prior]:
-        """Parameter name -> prior (:class:`bayescal.design.Prior`), with unit and description."""
+        """Calibrated parameter name -> prior (:class:`bayescal.design.Prior`), with unit and
+        description; screening candidates are left out (:meth:`screening_priors` has all)."""
+        return {name: self.parameters[name].to_prior() for name in self.calibrated}
+
+    def screening_priors(self) -> dict[str, Prior]:
+        """Every parameter's prior, candidates and calibrated ones, in study order."""
         return {name: parameter.to_prior() for name, parameter in self.parameters.items()}
 
     @field_validator("parameters")
@@ -376,10 +395,12 @@ class Study(Section):
     def _cross_checks(self) -> Study:
         problems = _target_problems(self) + _output_problems(self) + _period_problems(self)
         problems += _sampler_problems(self) + _aggregate_problems(self)
-        if self.design.runs < len(self.parameters) + 2:
+        t = len(self.calibrated)
+        if t and self.design.runs < t + 2:
             problems.append(
-                f"design.runs: {self.design.runs} runs for {len(self.parameters)} parameters; "
-                f"at least {len(self.parameters) + 2} are needed"
+                f"design.runs: {self.design.runs} runs for {t} "
+                f"{'calibrated ' if self.candidates else ''}parameters; "
+                f"at least {t + 2} are needed"
             )
         raise_problems(problems)
         return self
