@@ -67,6 +67,12 @@ _ENTRIES = [
     Quantity("pressure", "pressure", "atmospheric pressure"),
     Quantity("heating_power", "power", "heating power delivered to the indoor air"),
     Quantity("heat_input", "power", "imposed heat input to the indoor air (free-float)"),
+    Quantity(
+        "hvac_operation",
+        "dimensionless",
+        "share of each clock interval the HVAC runs by its schedule (a building's known "
+        "operating hours: 1 on, 0 off)",
+    ),
     Quantity("electricity", "energy", "electricity use over each clock interval (a meter)"),
     Quantity("gas", "energy", "fuel (natural gas) use over each clock interval (a meter)"),
     Quantity("heating_energy", "energy", "heat delivered over each clock interval"),

@@ -48,9 +48,12 @@ def study_summary(study: Any, measured: Any) -> str:
         prior = p.prior
         shape = f", a={prior.a:g}, b={prior.b:g}" if prior.distribution == "beta" else ""
         mark = " (screen)" if p.screen else ""
+        targets = ", ".join(p.targets[:2]) + (
+            f" and {len(p.targets) - 2} more" if len(p.targets) > 2 else ""
+        )
         lines.append(
             f"  {name}{mark} [{p.unit}]: nominal {p.nominal:g}, {prior.distribution}"
-            f"({prior.lower:g}, {prior.upper:g}{shape}) -> {', '.join(p.targets)}"
+            f"({prior.lower:g}, {prior.upper:g}{shape}) -> {targets}"
         )
     step = study.data.step
     lay = measured.layout
@@ -96,7 +99,8 @@ def _simulator_line(sim: Any) -> str:
 def metrics_text(train: Mapping[str, Metrics], test: Mapping[str, Metrics]) -> str:
     """Plain-text table of fit metrics per output and window (``bayescal simulate``)."""
     columns = metric_columns("simulate")
-    head = f"{'output':<16}{'window':<8}" + "".join(f"{c.label:>{c.width}}" for c in columns)
+    wide = max([16, *(len(name) + 2 for name in (*train, *test))])
+    head = f"{'output':<{wide}}{'window':<8}" + "".join(f"{c.label:>{c.width}}" for c in columns)
     rows = [head]
     for window, metrics in (("train", train), ("test", test)):
         for name, m in metrics.items():
@@ -107,7 +111,7 @@ def metrics_text(train: Mapping[str, Metrics], test: Mapping[str, Metrics]) -> s
                 else f"{values[c.name]:>{c.width}.{c.digits}g}"
                 for c in columns
             )
-            rows.append(f"{name:<16}{window:<8}{cells}")
+            rows.append(f"{name:<{wide}}{window:<8}{cells}")
     return "\n".join(rows)
 
 

@@ -207,7 +207,8 @@ class EnergyPlusSimulator:
         ``scale`` and ``aggregate``) or an :class:`OutputSpec`.
     weather
         ``"from-forcing"`` (an EPW written from the forcing, absent series
-        filled as in :mod:`bayescal.simulators.epw`) or the path of an EPW.
+        filled as in :mod:`bayescal.simulators.epw`) or the path of an EPW
+        (read once; its content travels with the simulator to the workers).
     timesteps_per_hour
         EnergyPlus time steps per hour, a divisor of 60; default: the model's
         ``Timestep``, at least 20 with the finite-difference algorithm. [1/h]
@@ -298,10 +299,13 @@ class EnergyPlusSimulator:
         self._isolation = isolation
         self._workdir = None if workdir is None else Path(workdir)
         self._keep_outputs = bool(keep_outputs)
+        # The weather file travels with the simulator (to worker processes and remote Dask
+        # workers, which need not see the same file system) and is written into each run.
+        self._weather_bytes = (
+            self._weather.read_bytes() if isinstance(self._weather, Path) else None
+        )
         self._weather_sha256 = (
-            hashlib.sha256(self._weather.read_bytes()).hexdigest()
-            if isinstance(self._weather, Path)
-            else None
+            hashlib.sha256(self._weather_bytes).hexdigest() if self._weather_bytes else None
         )
 
     @property
@@ -406,8 +410,9 @@ class EnergyPlusSimulator:
         self._configure(model, clock)
         for series, spec in self._schedules.items():
             _write_schedule(model, folder, spec, clock, clock.seconds, forcing[series])
-        if isinstance(self._weather, Path):
-            weather = self._weather
+        if self._weather_bytes is not None:
+            weather = folder / "weather.epw"
+            weather.write_bytes(self._weather_bytes)
         else:
             weather = write_epw(
                 folder / "weather.epw", forcing, site, records_per_hour=self._records_per_hour
