@@ -141,3 +141,48 @@ def test_output_specs_are_checked() -> None:
         parse_output("e", {"meter": "Gas:Facility", "variable": "x"})
     with pytest.raises(SimulatorError, match="aggregate must be one of"):
         parse_output("e", {"variable": "x", "key": "y", "aggregate": "max"})
+
+
+def test_package_paths_name_the_files_that_ship_with_energyplus(tmp_path: Path) -> None:
+    from bayescal.config.energyplus import EnergyPlusSection
+
+    section = EnergyPlusSection.model_validate(
+        {
+            "type": "energyplus",
+            "model": "pyenergyplus:model/RefBldgSmallOfficeNew2004_Chicago.idf",
+            "weather": "pyenergyplus:weather/USA_IL_Chicago-OHare.Intl.AP.725300_TMY3.epw",
+            "outputs": {"electricity": {"meter": "Electricity:Facility"}},
+        },
+        context={"root": tmp_path},
+    )
+    assert section.model == OFFICE
+    assert section.weather == WEATHER
+    with pytest.raises(ValueError, match=r"pyenergyplus ships no 'weather/nowhere\.epw'"):
+        EnergyPlusSection.model_validate(
+            {
+                "type": "energyplus",
+                "model": "model.epJSON",
+                "weather": "pyenergyplus:weather/nowhere.epw",
+                "outputs": {"electricity": {"meter": "Electricity:Facility"}},
+            },
+            context={"root": tmp_path},
+        )
+
+
+@pytest.mark.parametrize(
+    ("output", "match"),
+    [
+        ({"variable": "Zone Mean Air Temperature"}, "needs its key"),
+        ({"meter": "Gas:Facility", "key": "x"}, "a meter has no key"),
+        ({"meter": "Gas:Facility", "variable": "x", "key": "y"}, "either variable"),
+        ({}, "either variable"),
+    ],
+)
+def test_output_sections_are_variables_or_meters(tmp_path: Path, output: dict, match: str) -> None:
+    from bayescal.config.energyplus import EnergyPlusSection
+
+    with pytest.raises(ValueError, match=match):
+        EnergyPlusSection.model_validate(
+            {"type": "energyplus", "model": "m.epJSON", "outputs": {"gas": output}},
+            context={"root": tmp_path},
+        )
