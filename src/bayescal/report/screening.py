@@ -61,7 +61,8 @@ def plot_mu_sigma(path: Path, ix: MorrisIndices, candidates: Sequence[str], labe
     line = np.array([0.0, top])
     ax.plot(line, line, color="0.5", lw=0.8, ls="--", label="sigma = mu*")
     order = np.argsort(-ix.mu_star)
-    for j in order[: min(12, order.size)]:
+    labelled = [j for j in order[:10] if ix.normalised[j] >= 0.1]  # the crowd near 0 stays quiet
+    for j in labelled:
         ax.annotate(ix.names[j], (ix.mu_star[j], ix.sigma[j]), fontsize=7, xytext=(3, 3),
                     textcoords="offset points")  # fmt: skip
     ax.set_xlabel(f"mu* [{label} per prior range]")
