@@ -36,6 +36,7 @@ FLOORS: dict[str, int] = {
     "design": 3,
     "mcmc": 3,
     "simulators": 3,
+    "screening": 3,
     "emulator": 4,
     "calibration": 5,
     "discrepancy": 6,

@@ -12,6 +12,15 @@ Sign conventions
     Heat flux at the outside surface, positive from the outside environment
     into the wall [W/m²]. In steady state with a warm inside,
     ``heat_flux_in = heat_flux_out < 0``.
+
+Meters and zones
+----------------
+``electricity``, ``gas``, ``heating_energy`` and ``cooling_energy`` are
+energies over each interval of the study clock [J] (a meter's reading: the
+value stamped ``t`` is the total over ``(t - step, t]``). A building has many
+zones and meters: these names and ``temp_air_in``, ``heating_power`` take a
+label, ``temp_air_in_core`` or ``electricity_lights`` (lower-case letters,
+digits and ``_``), and keep their quantity.
 """
 
 from __future__ import annotations
@@ -58,21 +67,77 @@ _ENTRIES = [
     Quantity("pressure", "pressure", "atmospheric pressure"),
     Quantity("heating_power", "power", "heating power delivered to the indoor air"),
     Quantity("heat_input", "power", "imposed heat input to the indoor air (free-float)"),
+    Quantity(
+        "hvac_operation",
+        "dimensionless",
+        "share of each clock interval the HVAC runs by its schedule (a building's known "
+        "operating hours: 1 on, 0 off)",
+    ),
+    Quantity("electricity", "energy", "electricity use over each clock interval (a meter)"),
+    Quantity("gas", "energy", "fuel (natural gas) use over each clock interval (a meter)"),
+    Quantity("heating_energy", "energy", "heat delivered over each clock interval"),
+    Quantity("cooling_energy", "energy", "heat removed over each clock interval"),
 ]
 
-GLOSSARY: dict[str, Quantity] = {q.name: q for q in _ENTRIES}
-
-
 _INDEXED = re.compile(r"^(?P<base>\w+_interface)_(?P<index>\d+)$")
+#: Names that take a zone or meter label: ``temp_air_in_core``, ``electricity_lights``.
+LABELLED = (
+    "temp_air_in",
+    "heating_power",
+    "electricity",
+    "gas",
+    "heating_energy",
+    "cooling_energy",
+)
+_LABELLED = re.compile(
+    r"^(?P<base>" + "|".join(LABELLED) + r")_(?P<label>[a-z0-9]+(?:_[a-z0-9]+)*)$"
+)
+
+
+class _Glossary(dict[str, Quantity]):
+    """The glossary entries by name; looking up a labelled or indexed name finds its base.
+
+    Iterating gives the entries only (``temp_air_in``, not every zone label).
+    """
+
+    def __missing__(self, name: str) -> Quantity:
+        found = _derived(self, name)
+        if found is None:
+            raise KeyError(name)
+        return found
+
+    def __contains__(self, name: object) -> bool:
+        return isinstance(name, str) and (
+            dict.__contains__(self, name) or _derived(self, name) is not None
+        )
+
+    def get(self, name: str, default: Quantity | None = None) -> Quantity | None:  # type: ignore[override]
+        try:
+            return self[name]
+        except KeyError:
+            return default
+
+
+def _derived(entries: dict[str, Quantity], name: str) -> Quantity | None:
+    """The entry of an indexed (``temp_interface_2``) or labelled (``temp_air_in_core``) name."""
+    for pattern in (_INDEXED, _LABELLED):
+        match = pattern.match(name)
+        if match and dict.__contains__(entries, match["base"]):
+            base = dict.__getitem__(entries, match["base"])
+            label = match.groupdict().get("label")
+            text = f"{base.description} ({label})" if label else base.description
+            return Quantity(name, base.dimension, text)
+    return None
+
+
+GLOSSARY: dict[str, Quantity] = _Glossary({q.name: q for q in _ENTRIES})
 
 
 def glossary_quantity(name: str) -> Quantity | None:
     """The glossary entry of a series name, or None.
 
     Interface series of walls carry the interface index: ``temp_interface_2``
-    is a ``temp_interface`` (the interface between layers 1 and 2).
+    is a ``temp_interface`` (the interface between layers 1 and 2). Zones and
+    meters carry a label: ``temp_air_in_core`` is a ``temp_air_in``.
     """
-    if name in GLOSSARY:
-        return GLOSSARY[name]
-    match = _INDEXED.match(name)
-    return GLOSSARY.get(match["base"]) if match else None
+    return GLOSSARY.get(name)

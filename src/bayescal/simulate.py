@@ -60,7 +60,7 @@ def check_simulation(study: Study, overrides: Mapping[str, float] | None = None)
             raise ConfigError(f"unknown parameter {name!r}; the study has {sorted(parameters)}")
         parameters[name] = float(value)
     measured = load_measured(study)
-    simulator = build_simulator(study)
+    simulator = build_simulator(study, screening=True)  # --set may change a candidate too
     simulated = simulator.simulate(parameters, measured.forcing)
     layout = measured.layout
     first = int(layout.train_starts[0]) if layout.m_star else layout.warmup

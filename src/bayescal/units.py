@@ -13,6 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
+from scipy.constants import Btu
 
 from bayescal.errors import DataError
 
@@ -48,6 +49,16 @@ _add(("1", "-", "fraction"), "dimensionless", 1.0)
 _add(("Pa",), "pressure", 1.0)
 _add(("hPa", "mbar"), "pressure", 100.0)
 _add(("kPa",), "pressure", 1000.0)
+# Energy over a clock interval (meters): J inside.
+_add(("J",), "energy", 1.0)
+_add(("kJ",), "energy", 1.0e3)
+_add(("MJ",), "energy", 1.0e6)
+_add(("GJ",), "energy", 1.0e9)
+_add(("Wh",), "energy", 3600.0)
+_add(("kWh",), "energy", 3.6e6)
+_add(("MWh",), "energy", 3.6e9)
+_add(("kBtu",), "energy", 1.0e3 * Btu)  # international-table Btu
+_add(("therm",), "energy", 1.0e5 * Btu)
 
 INTERNAL_UNIT = {
     "temperature": "°C",
@@ -58,6 +69,7 @@ INTERNAL_UNIT = {
     "fraction_percent": "%",
     "dimensionless": "1",
     "pressure": "Pa",
+    "energy": "J",
 }
 
 

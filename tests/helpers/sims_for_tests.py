@@ -212,3 +212,28 @@ class Faulty(Analytic):
         if b < self.hang:
             time.sleep(3600)
         return super().simulate(parameters, forcing)
+
+
+@dataclass(frozen=True)
+class Logged(Analytic):
+    """Sleeps ``delay`` seconds; appends ``start``/``done`` lines to ``log`` (a file).
+
+    Each line is ``<event> <a> <b> <ppid>``: the parameters name the run, the
+    parent process (a runner worker's sandbox runs in a child of the Dask
+    worker) names the worker that ran it.
+    """
+
+    log: str = "runs.log"
+    delay: float = 1.0
+
+    def _write(self, event: str, parameters: Mapping[str, float]) -> None:
+        line = f"{event} {parameters['a']!r} {parameters['b']!r} {os.getppid()}\n"
+        with open(self.log, "a", encoding="utf-8") as stream:  # O_APPEND: whole lines
+            stream.write(line)
+
+    def simulate(self, parameters: Mapping[str, float], forcing: Forcing) -> dict[str, np.ndarray]:
+        self._write("start", parameters)
+        time.sleep(self.delay)
+        out = super().simulate(parameters, forcing)
+        self._write("done", parameters)
+        return out

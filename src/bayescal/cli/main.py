@@ -251,6 +251,57 @@ def run(
 
 @main.command()
 @STUDY
+@click.option(
+    "--apply",
+    is_flag=True,
+    help="Set screen = false on the proposed parameters and screen = true on the others in "
+    "the study file (the old file is kept as study.toml.bak).",
+)
+@click.option("--jobs", "-j", type=click.IntRange(min=1), default=None, help="Simulation workers.")
+@click.option(
+    "--backend",
+    type=click.Choice(["serial", "processes", "dask"]),
+    default=None,
+    help="Simulation backend [default: the study's runner.backend].",
+)
+@click.option("--scheduler", default=None, help="Dask scheduler address (implies --backend dask).")
+@click.option("--quiet", "-q", is_flag=True, help="No progress bar or notes; errors only.")
+@user_errors
+def screen(
+    study: Path,
+    apply: bool,
+    jobs: int | None,
+    backend: str | None,
+    scheduler: str | None,
+    quiet: bool,
+) -> None:
+    """Rank the parameters by Morris elementary effects and propose those to calibrate.
+
+    Screens every [parameters.<name>] (candidates with screen = true and the
+    calibrated ones) on each calibrated output over the training periods;
+    writes OUTPUT_DIR/screening/ (screening.html, morris.csv, proposal.json).
+    Runs are cached with the design's, so a second screen reuses them.
+    """
+    from bayescal.cli.progress import progress_options, screening_text
+    from bayescal.config import load_study
+    from bayescal.pipeline import Options
+    from bayescal.pipeline.screen import screen as run_screen
+
+    config = load_study(study)
+    options = Options(backend=backend, jobs=jobs, scheduler=scheduler, **progress_options(quiet))
+    res = run_screen(
+        config, options=options, apply=apply, say=(lambda _: None) if quiet else click.echo
+    )
+    if not quiet:
+        click.echo(screening_text(res.indices, res.proposal))
+    if apply:
+        changed = ", ".join(res.applied) or "none (already as proposed)"
+        click.echo(f"updated screen flags in {config.path}: {changed}")
+    click.echo(f"screening: {res.page}")
+
+
+@main.command()
+@STUDY
 @user_errors
 def show(study: Path) -> None:
     """Summarise a calibration: posterior, diagnostics, metrics (what has run so far)."""

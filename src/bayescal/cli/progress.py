@@ -4,6 +4,7 @@
 * :func:`metrics_text` -- the metrics table of ``bayescal simulate``;
 * :func:`describe` -- what ``bayescal run`` and ``bayescal show`` print;
 * :func:`comparison_text` -- the ranking ``bayescal compare`` prints;
+* :func:`screening_text` -- the Morris ranks and proposal of ``bayescal screen``;
 * :func:`progress_options` -- the progress bars of the simulations and the
   MCMC stages (tqdm), as :class:`bayescal.pipeline.Options` takes them.
 
@@ -22,6 +23,7 @@ from bayescal.runner import Progress
 
 if TYPE_CHECKING:
     from bayescal.pipeline import Results
+    from bayescal.screening import MorrisIndices, Proposal
 
 __all__ = [
     "budget_line",
@@ -30,6 +32,7 @@ __all__ = [
     "mcmc_bar",
     "metrics_text",
     "progress_options",
+    "screening_text",
     "study_summary",
 ]
 
@@ -46,13 +49,19 @@ def study_summary(study: Any, measured: Any) -> str:
     from bayescal.data.align import format_duration
 
     lines = [f"study {study.study.name!r} ({study.path})", _simulator_line(study.simulator)]
-    lines.append(f"parameters ({len(study.parameters)}):")
+    candidates = len(study.candidates)
+    held = f", {candidates} screening candidates held at nominal" if candidates else ""
+    lines.append(f"parameters ({len(study.parameters)}{held}):")
     for name, p in study.parameters.items():
         prior = p.prior
         shape = f", a={prior.a:g}, b={prior.b:g}" if prior.distribution == "beta" else ""
+        mark = " (screen)" if p.screen else ""
+        targets = ", ".join(p.targets[:2]) + (
+            f" and {len(p.targets) - 2} more" if len(p.targets) > 2 else ""
+        )
         lines.append(
-            f"  {name} [{p.unit}]: nominal {p.nominal:g}, {prior.distribution}"
-            f"({prior.lower:g}, {prior.upper:g}{shape}) -> {', '.join(p.targets)}"
+            f"  {name}{mark} [{p.unit}]: nominal {p.nominal:g}, {prior.distribution}"
+            f"({prior.lower:g}, {prior.upper:g}{shape}) -> {targets}"
         )
     step = study.data.step
     lay = measured.layout
@@ -122,7 +131,8 @@ def _simulator_line(sim: Any) -> str:
 def metrics_text(train: Mapping[str, Metrics], test: Mapping[str, Metrics]) -> str:
     """Plain-text table of fit metrics per output and window (``bayescal simulate``)."""
     columns = metric_columns("simulate")
-    head = f"{'output':<16}{'window':<8}" + "".join(f"{c.label:>{c.width}}" for c in columns)
+    wide = max([16, *(len(name) + 2 for name in (*train, *test))])
+    head = f"{'output':<{wide}}{'window':<8}" + "".join(f"{c.label:>{c.width}}" for c in columns)
     rows = [head]
     for window, metrics in (("train", train), ("test", test)):
         for name, m in metrics.items():
@@ -133,7 +143,7 @@ def metrics_text(train: Mapping[str, Metrics], test: Mapping[str, Metrics]) -> s
                 else f"{values[c.name]:>{c.width}.{c.digits}g}"
                 for c in columns
             )
-            rows.append(f"{name:<16}{window:<8}{cells}")
+            rows.append(f"{name:<{wide}}{window:<8}{cells}")
     return "\n".join(rows)
 
 
@@ -281,4 +291,22 @@ def comparison_text(table: Any, notes: Sequence[str], files: Mapping[str, Any]) 
     )
     lines += [f"note: {n}" for n in notes]
     lines += [f"wrote {path}" for path in files.values()]
+    return "\n".join(lines)
+
+
+def screening_text(indices: Sequence[MorrisIndices], proposal: Proposal) -> str:
+    """The Morris ranks of each output (mu* with its 95 % interval) and the proposal."""
+    lines = []
+    for ix in indices:
+        lines.append(f"{ix.output}: mu* [per prior range] ({ix.trajectories} trajectories)")
+        for j in np.argsort(-ix.mu_star, kind="stable"):
+            lines.append(
+                f"  {int(ix.ranks[j]):3d}  {ix.names[j]:<24s} {ix.mu_star[j]:11.4g} "
+                f"± {ix.mu_star_conf[j]:<10.3g} sigma {ix.sigma[j]:.3g}"
+            )
+    cap = "" if proposal.max_parameters is None else f", at most {proposal.max_parameters}"
+    lines.append(
+        f"proposed (mu* >= {proposal.threshold:g} × the largest for an output{cap}): "
+        + (", ".join(proposal.selected) or "none")
+    )
     return "\n".join(lines)

@@ -18,6 +18,8 @@ Modules
     The ``[simulator]`` sections, one class per simulator type (EnergyPlus in
     :mod:`~bayescal.config.energyplus`, command and FMU in
     :mod:`~bayescal.config.external`).
+:mod:`~bayescal.config.screening`
+    ``[screening]``: the Morris design of ``bayescal screen``.
 :mod:`~bayescal.config.targets`
     Calibration targets: their kinds and units, sensor-model targets.
 :mod:`~bayescal.config.base`
@@ -35,6 +37,7 @@ from bayescal.config.energyplus import EnergyPlusOutput, EnergyPlusSchedule, Ene
 from bayescal.config.external import CommandOutputs, CommandSection, FmuSection
 from bayescal.config.messages import format_errors
 from bayescal.config.parameters import BetaPriorSpec, Parameter, PriorSpec, UniformPriorSpec
+from bayescal.config.screening import ScreeningSection
 from bayescal.config.simulators import BoxSimulator, LayerSpec, SimulatorSection, WallSimulator
 from bayescal.config.study import (
     NUTS_MIN_WARMUP,
@@ -80,6 +83,7 @@ __all__ = [
     "PredictSection",
     "PriorSpec",
     "RunnerSection",
+    "ScreeningSection",
     "SimulatorSection",
     "Study",
     "StudySection",

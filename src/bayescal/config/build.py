@@ -16,7 +16,11 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-from bayescal.config.energyplus import EnergyPlusSection, parse_energyplus_target
+from bayescal.config.energyplus import (
+    EnergyPlusOutput,
+    EnergyPlusSection,
+    parse_energyplus_target,
+)
 from bayescal.config.external import CommandSection, FmuSection
 from bayescal.config.simulators import BoxSimulator, WallSimulator
 from bayescal.config.study import Study
@@ -25,7 +29,7 @@ from bayescal.errors import BayescalError, ConfigError, SimulatorError
 from bayescal.simulators.base import Simulator
 from bayescal.simulators.energyplus_model import energyplus_field_key
 from bayescal.simulators.fvm import Layer
-from bayescal.simulators.wrappers import SensorModel, TargetedSimulator
+from bayescal.simulators.wrappers import FixedParameters, SensorModel, TargetedSimulator
 
 __all__ = ["build_simulator", "nominal_parameters"]
 
@@ -96,15 +100,34 @@ def _energyplus(section: EnergyPlusSection, study: Study) -> Simulator:
             schedules={
                 n: ScheduleInput(s.schedule, s.lead_steps) for n, s in section.schedules.items()
             },
-            outputs={n: (o.variable, o.key, o.scale) for n, o in section.outputs.items()},
+            outputs={n: _energyplus_output(n, o, study) for n, o in section.outputs.items()},
             weather=section.weather,
             timesteps_per_hour=section.timesteps_per_hour,
             algorithm=section.algorithm,
             warmup_days=section.warmup_days,
             timeout=section.timeout,
+            workdir=study.root / study.study.output_dir / "energyplus"
+            if section.keep_outputs
+            else None,
+            keep_outputs=section.keep_outputs,
         )
     except SimulatorError as exc:
         raise _energyplus_problem(section, study) or exc from None
+
+
+def _energyplus_output(name: str, output: EnergyPlusOutput, study: Study) -> dict[str, Any]:
+    """One ``[simulator.outputs.<name>]`` as the adapter takes it, aggregated like its data."""
+    column = study.data.columns.get(name)
+    spec: dict[str, Any] = {
+        "scale": output.scale,
+        "aggregate": column.aggregate if column is not None else "point",
+    }
+    if output.meter is not None:
+        spec["meter"] = output.meter
+        spec["aggregate"] = "sum" if spec["aggregate"] == "point" else spec["aggregate"]
+    else:
+        spec |= {"variable": output.variable, "key": output.key}
+    return spec
 
 
 def _require_file(path: Path, key: str, what: str) -> None:
@@ -252,8 +275,12 @@ def _fmu_key(section: FmuSection, study: Study) -> str | None:
     return next((key for key, var in references if var not in names), None)
 
 
-def build_simulator(study: Study) -> Simulator:
+def build_simulator(study: Study, *, screening: bool = False) -> Simulator:
     """The simulator of ``study``, taking the study's parameter names.
+
+    Screening candidates (``screen = true``) are held at their nominal values
+    unless ``screening`` is true (then every parameter is free: ``bayescal
+    screen`` and ``bayescal simulate``).
 
     Files the study names (EnergyPlus model, templates, program, FMU) are
     read here, so problems in them surface now, before any run.
@@ -280,10 +307,15 @@ def build_simulator(study: Study) -> Simulator:
     }
     sensors = {name: targets for name, targets in sensors.items() if targets}
     if not sensors:
-        return _build_physics(study)
-    physics = {name: p for name, p in study.parameters.items() if name not in sensors}
-    inner = _build_physics(study.model_copy(update={"parameters": physics}))
-    return SensorModel(inner, tuple(study.parameters), sensors)
+        simulator = _build_physics(study)
+    else:
+        physics = {name: p for name, p in study.parameters.items() if name not in sensors}
+        inner = _build_physics(study.model_copy(update={"parameters": physics}))
+        simulator = SensorModel(inner, tuple(study.parameters), sensors)
+    if screening or not study.candidates:
+        return simulator
+    fixed = {name: study.parameters[name].nominal for name in study.candidates}
+    return FixedParameters(simulator, fixed)
 
 
 def _build_physics(study: Study) -> Simulator:

@@ -60,6 +60,17 @@ class ColumnSpec(Section):
         -1,
         default=1,
     )
+    aggregate: Literal["point", "mean", "sum"] = field_doc(
+        "What a value stands for on the study clock, and so how finer data and the "
+        "simulated series are brought to it: 'point' (the value at the instant; finer data "
+        "are averaged over centred windows), 'mean' (the mean over the interval (t - step, "
+        "t] ending at the timestamp) or 'sum' (the total over that interval: a meter; for "
+        "energies, J, kWh, Wh, therm...). 'mean' and 'sum' ask the simulator for interval "
+        "values (EnergyPlus sums or averages its time steps).",
+        "sum",
+        "mean",
+        default="point",
+    )
 
     @field_validator("source", mode="before")
     @classmethod
@@ -249,6 +260,17 @@ def column_problems(key: str, name: str, spec: ColumnSpec, fmt: str) -> list[str
         )
     if spec.sign == -1 and quantity.dimension == "temperature":
         problems.append(f"{key}.sign: -1 on a temperature makes no sense (fluxes, powers only)")
+    if quantity.dimension == "energy" and spec.aggregate != "sum":
+        problems.append(
+            f"{key}.aggregate: {name} is an energy over each clock interval (a meter); "
+            f"set aggregate = 'sum', got {spec.aggregate!r}"
+        )
+    elif spec.aggregate == "sum" and quantity.dimension != "energy":
+        problems.append(
+            f"{key}.aggregate: 'sum' adds up energies over each interval, {name} is a "
+            f"{quantity.dimension.replace('_', ' ')}; use 'mean' (or an energy quantity "
+            "such as 'electricity' with unit 'kWh')"
+        )
     return problems + _source_problems(key, spec.source, fmt)
 
 

@@ -7,6 +7,7 @@ object, and checked against the parameter's unit.
 
 from __future__ import annotations
 
+import importlib.util
 import re
 from pathlib import Path
 from typing import Any, ClassVar, Literal
@@ -19,9 +20,11 @@ from bayescal.simulators.energyplus_model import energyplus_field_key
 
 __all__ = [
     "ENERGYPLUS_FIELD_KINDS",
+    "PACKAGE_PREFIX",
     "EnergyPlusOutput",
     "EnergyPlusSchedule",
     "EnergyPlusSection",
+    "package_file",
     "parse_energyplus_target",
 ]
 
@@ -71,6 +74,41 @@ def parse_energyplus_target(target: str) -> tuple[str, str, str]:
     return match["object"], name, match["field"].strip()
 
 
+PACKAGE_PREFIX = "pyenergyplus:"
+"""A model or weather path starting with this names a file of the ``data`` folder that
+``pyenergyplus-lbnl`` ships: ``"pyenergyplus:model/RefBldgSmallOfficeNew2004_Chicago.idf"``,
+``"pyenergyplus:weather/USA_IL_Chicago-OHare.Intl.AP.725300_TMY3.epw"``."""
+
+
+def package_file(text: str) -> Path:
+    """The file ``"pyenergyplus:<path>"`` names in the package's ``data`` folder.
+
+    Raises
+    ------
+    ValueError
+        If the package is not installed or holds no such file.
+    """
+    relative = text[len(PACKAGE_PREFIX) :].strip().lstrip("/")
+    spec = importlib.util.find_spec("pyenergyplus")
+    if spec is None or not spec.submodule_search_locations:
+        raise ValueError(
+            f"{text!r} names a file of the package pyenergyplus-lbnl, which is not installed; "
+            "pip install 'bayescal[energyplus]'"
+        )
+    data = Path(next(iter(spec.submodule_search_locations))) / "data"
+    path = data / relative
+    if ".." in Path(relative).parts or not path.is_file():
+        folders = ", ".join(sorted(p.name + "/" for p in data.iterdir() if p.is_dir()))
+        raise ValueError(f"pyenergyplus ships no {relative!r} (its data folder holds {folders})")
+    return path
+
+
+def _from_package(value: object) -> object:
+    if isinstance(value, str) and value.startswith(PACKAGE_PREFIX):
+        return package_file(value)
+    return value
+
+
 class EnergyPlusSchedule(Section):
     """``[simulator.schedules.<glossary name>]``: the ``Schedule:File`` a forcing series feeds."""
 
@@ -92,15 +130,41 @@ class EnergyPlusSchedule(Section):
 
 
 class EnergyPlusOutput(Section):
-    """``[simulator.outputs.<name>]`` (energyplus): a report variable returned as a series."""
+    """``[simulator.outputs.<name>]`` (energyplus): a report variable or a meter returned as
+    a series (give ``variable`` and ``key``, or ``meter``)."""
 
-    variable: str = field_doc(
-        "Report variable name.", "Surface Inside Face Conduction Heat Transfer Rate per Area"
+    variable: str | None = field_doc(
+        "Report variable name.",
+        "Surface Inside Face Conduction Heat Transfer Rate per Area",
+        "Zone Mean Air Temperature",
+        default=None,
     )
-    key: str = field_doc("Key value (surface, zone... name), case-insensitive.", "Wall")
+    key: str | None = field_doc(
+        "Key value (surface, zone... name) of the variable, case-insensitive.",
+        "Wall",
+        "Core_ZN",
+        default=None,
+    )
+    meter: str | None = field_doc(
+        "Meter name (an energy per time step, J): the output's [data.columns] entry "
+        "says aggregate = 'sum'.",
+        "Electricity:Facility",
+        "NaturalGas:Facility",
+        default=None,
+    )
     scale: float = field_doc(
         "Factor applied to the values (-1 flips a sign convention). [-]", -1.0, default=1.0
     )
+
+    @model_validator(mode="after")
+    def _one_source(self) -> EnergyPlusOutput:
+        if (self.meter is None) == (self.variable is None):
+            raise ValueError("give either variable (with key) or meter")
+        if self.variable is not None and self.key is None:
+            raise ValueError(f"variable {self.variable!r} needs its key (a zone, surface... name)")
+        if self.meter is not None and self.key is not None:
+            raise ValueError("a meter has no key; remove key")
+        return self
 
 
 class EnergyPlusSection(SimulatorBase):
@@ -112,8 +176,10 @@ class EnergyPlusSection(SimulatorBase):
     type: Literal["energyplus"] = field_doc("Simulator type.", "energyplus")
     model: Path = field_doc(
         "The model, .epJSON or .idf (converted once by EnergyPlus), relative to the study "
-        "folder (or absolute).",
+        "folder (or absolute); 'pyenergyplus:model/<file>' for a model that ships with "
+        "EnergyPlus (package pyenergyplus-lbnl).",
         "paper_wall.epJSON",
+        "pyenergyplus:model/RefBldgSmallOfficeNew2004_Chicago.idf",
     )
     schedules: dict[str, EnergyPlusSchedule] = field_doc(
         "Forcing series (glossary name) -> Schedule:File name, or {schedule, lead_steps}; "
@@ -136,9 +202,12 @@ class EnergyPlusSection(SimulatorBase):
     )
     weather: Literal["from-forcing"] | Path = field_doc(
         "'from-forcing' (an EPW written from the boundary conditions; absent series filled as "
-        "bayescal.simulators.epw says) or an EPW file, relative to the study folder.",
+        "bayescal.simulators.epw says) or an EPW file, relative to the study folder; "
+        "'pyenergyplus:weather/<file>' for one that ships with EnergyPlus. The file travels "
+        "with the simulator to the workers.",
         "from-forcing",
         "weather/uccle.epw",
+        "pyenergyplus:weather/USA_IL_Chicago-OHare.Intl.AP.725300_TMY3.epw",
         default="from-forcing",
     )
     algorithm: Literal["ConductionTransferFunction", "ConductionFiniteDifference"] | None = (
@@ -165,6 +234,18 @@ class EnergyPlusSection(SimulatorBase):
     timeout: float = field_doc(
         "A run taking longer is stopped and fails. [s]", 600.0, default=600.0, gt=0
     )
+    keep_outputs: bool = field_doc(
+        "Keep every run's folder (model, EnergyPlus's output files) in OUTPUT_DIR/energyplus "
+        "instead of deleting it once the requested series are read (debugging; a "
+        "reference building's files take about 2 MB a run).",
+        True,
+        default=False,
+    )
+
+    @field_validator("model", "weather", mode="before")
+    @classmethod
+    def _package_paths(cls, value: object) -> object:
+        return _from_package(value)
 
     @field_validator("model")
     @classmethod

@@ -71,6 +71,13 @@ class Parameter(Section):
         min_length=1,
     )
     description: str = field_doc("Text for reports.", "conductivity of the blocks", default="")
+    screen: bool = field_doc(
+        "A screening candidate: `bayescal screen` ranks it with the others, and `bayescal "
+        "run` holds it at its nominal value instead of calibrating it (set it to false, or "
+        "let `bayescal screen --apply` do so, to calibrate it).",
+        True,
+        default=False,
+    )
 
     @model_validator(mode="after")
     def _nominal_inside(self) -> Parameter:

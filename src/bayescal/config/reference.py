@@ -22,6 +22,7 @@ from bayescal.config import data as cfg_data
 from bayescal.config import energyplus as cfg_energyplus
 from bayescal.config import external as cfg_external
 from bayescal.config import parameters as cfg_parameters
+from bayescal.config import screening as cfg_screening
 from bayescal.config import simulators as cfg_simulators
 from bayescal.config import study as cfg_study
 
@@ -53,6 +54,7 @@ _SECTIONS: list[tuple[str, type[BaseModel], str]] = [
     ("[discrepancy]", cfg_study.DiscrepancySection, ""),
     ("[predict]", cfg_study.PredictSection, ""),
     ("[runner]", cfg_study.RunnerSection, ""),
+    ("[screening]", cfg_screening.ScreeningSection, ""),
 ]
 
 

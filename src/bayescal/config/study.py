@@ -10,8 +10,8 @@ its key path, the value received and what was expected, on one line
 This module holds :class:`Study`, the small sections (``[study]``,
 ``[outputs]``, ``[periods]``, ``[design]``, ``[emulator]``,
 ``[calibration]``, ``[discrepancy]``, ``[predict]``, ``[runner]``) and the
-checks across sections; ``[data]``, ``[parameters]`` and ``[simulator]`` have
-modules of their own in :mod:`bayescal.config`.
+checks across sections; ``[data]``, ``[parameters]``, ``[simulator]`` and
+``[screening]`` have modules of their own in :mod:`bayescal.config`.
 """
 
 from __future__ import annotations
@@ -46,6 +46,7 @@ from bayescal.config.base import (
 from bayescal.config.data import DataSection
 from bayescal.config.messages import format_errors
 from bayescal.config.parameters import DerivedSpec, Parameter
+from bayescal.config.screening import ScreeningSection
 from bayescal.config.simulators import SimulatorSection
 from bayescal.config.targets import KIND_UNITS, SENSOR_PREFIX, normal_unit, parse_sensor_target
 from bayescal.errors import ConfigError, DataError
@@ -491,6 +492,9 @@ class Study(Section):
         {"R_walls": {"expression": "0.3 / k_brick + 0.08 / k_eps", "unit": "m²·K/W"}},
         default_factory=dict,
     )
+    screening: ScreeningSection = field_doc(
+        "Morris screening (bayescal screen).", default_factory=ScreeningSection
+    )
 
     _root: Path = PrivateAttr(default_factory=Path.cwd)
     _path: Path | None = PrivateAttr(default=None)
@@ -511,8 +515,23 @@ class Study(Section):
         measured = {*self.outputs.calibrate, *self.outputs.held_out}
         return tuple(n for n in self.data.columns if n not in measured)
 
+    @property
+    def calibrated(self) -> tuple[str, ...]:
+        """Names of the parameters calibrated (those without ``screen = true``), in order."""
+        return tuple(name for name, p in self.parameters.items() if not p.screen)
+
+    @property
+    def candidates(self) -> tuple[str, ...]:
+        """Names of the screening candidates (``screen = true``), held at nominal by ``run``."""
+        return tuple(name for name, p in self.parameters.items() if p.screen)
+
     def priors(self) -> dict[str, Prior]:
-        """Parameter name -> prior (:class:`bayescal.design.Prior`), with unit and description."""
+        """Calibrated parameter name -> prior (:class:`bayescal.design.Prior`), with unit and
+        description; screening candidates are left out (:meth:`screening_priors` has all)."""
+        return {name: self.parameters[name].to_prior() for name in self.calibrated}
+
+    def screening_priors(self) -> dict[str, Prior]:
+        """Every parameter's prior, candidates and calibrated ones, in study order."""
         return {name: parameter.to_prior() for name, parameter in self.parameters.items()}
 
     def expressions(self) -> dict[str, Expression]:
@@ -536,11 +555,13 @@ class Study(Section):
     def _cross_checks(self) -> Study:
         problems = _target_problems(self) + _output_problems(self) + _period_problems(self)
         problems += _derived_problems(self)
-        problems += _sampler_problems(self)
-        if self.design.runs < len(self.parameters) + 2:
+        problems += _sampler_problems(self) + _aggregate_problems(self)
+        t = len(self.calibrated)
+        if t and self.design.runs < t + 2:
             problems.append(
-                f"design.runs: {self.design.runs} runs for {len(self.parameters)} parameters; "
-                f"at least {len(self.parameters) + 2} are needed"
+                f"design.runs: {self.design.runs} runs for {t} "
+                f"{'calibrated ' if self.candidates else ''}parameters; "
+                f"at least {t + 2} are needed"
             )
         raise_problems(problems)
         return self
@@ -637,6 +658,32 @@ def _sensor_problems(study: Study, key: str, unit: str, target: str) -> list[str
             f"{key}.unit: the offset of {output!r} takes its unit ({quantity.unit}), got {unit!r}"
         ]
     return []
+
+
+def _aggregate_problems(study: Study) -> list[str]:
+    """Interval outputs (``aggregate`` 'sum' or 'mean') need a simulator that reports intervals."""
+    problems = []
+    sim = study.simulator
+    outputs = getattr(sim, "outputs", None)
+    for name in study.outputs.calibrate:
+        column = study.data.columns.get(name)
+        if column is None:
+            continue
+        how = column.aggregate
+        if how != "point" and sim.type in ("wall", "box"):
+            problems.append(
+                f"data.columns.{name}.aggregate: the {sim.type} simulator gives values at the "
+                f"clock instants, not {'totals' if how == 'sum' else 'means'} over its "
+                "intervals; use aggregate = 'point' or a simulator that reports intervals "
+                "(energyplus; a command or an FMU that returns interval values)"
+            )
+        meter = getattr(outputs.get(name), "meter", None) if isinstance(outputs, dict) else None
+        if meter is not None and how != "sum":
+            problems.append(
+                f"data.columns.{name}.aggregate: simulator.outputs.{name} is the meter "
+                f"{meter!r} (energy per time step); set aggregate = 'sum', got {how!r}"
+            )
+    return problems
 
 
 def _output_problems(study: Study) -> list[str]:

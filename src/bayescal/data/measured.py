@@ -22,6 +22,7 @@ import pandas as pd
 
 from bayescal.clock import format_duration
 from bayescal.data.align import Gap, RowLabels, align, fill_gaps
+from bayescal.data.meters import replace_interval_columns
 from bayescal.data.readers import (
     epw_field,
     read_csv,
@@ -347,8 +348,9 @@ def load_measured(study: Study) -> MeasuredData:
     raw, zone = _read(data, sources)
     labels = raw.attrs.get("rows")
     step = pd.Timedelta(data.step)
+    converted = _convert(raw, data)
     frame = align(
-        _convert(raw, data),
+        converted,
         step,
         zone=zone,
         start=None if data.start is None else pd.Timestamp(data.start),
@@ -357,6 +359,8 @@ def load_measured(study: Study) -> MeasuredData:
         labels=labels,
         resample=data.resample,
     )
+    aggregates = {name: spec.aggregate for name, spec in data.columns.items()}
+    frame = replace_interval_columns(frame, converted, aggregates, step, source=source)
     frame, gaps = fill_gaps(frame, pd.Timedelta(data.max_gap_interpolate))
     raw_index = pd.DatetimeIndex(raw.index).as_unit("ns")
     gaps = [dataclasses.replace(g, where=_where(g, raw_index, labels, step.value)) for g in gaps]

@@ -42,7 +42,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any, Protocol
+from typing import Any, Literal, Protocol
 
 import numpy as np
 import pandas as pd
@@ -60,6 +60,7 @@ from bayescal.metrics import (
     fit_metrics,
     meets_guideline14,
     metric_columns,
+    monthly_metrics,
 )
 from bayescal.periods import PeriodLayout
 
@@ -557,6 +558,12 @@ def _window_mask(ds: xr.Dataset, window: str) -> np.ndarray:
     return np.asarray(ds["window"].values == window)
 
 
+def _monthly_how(output: str) -> Literal["sum", "mean"]:
+    """Monthly totals for energies (meters), monthly means for anything else."""
+    quantity = GLOSSARY.get(output)
+    return "sum" if quantity is not None and quantity.dimension == "energy" else "mean"
+
+
 def metrics_table(ds: xr.Dataset) -> pd.DataFrame:
     """Fit metrics per output, model and window (see the module docstring)."""
     rows = []
@@ -576,6 +583,8 @@ def metrics_table(ds: xr.Dataset) -> pd.DataFrame:
                 if model != "nominal":
                     m |= _band_scores(ds, f"{o}_{key}", obs, mask)
                 m["guideline14"] = meets_guideline14(m["cv_rmse"], m["nmbe"])
+                times = ds["time"].values[mask]
+                m |= monthly_metrics(times, sim[mask], obs[mask], how=_monthly_how(o))
                 rows.append({"output": o, "model": model, "window": window} | m)
     columns = [*KEY_COLUMNS, *(c.name for c in metric_columns("csv"))]
     return pd.DataFrame(rows, columns=columns)

@@ -455,6 +455,12 @@ def run(
     for name, value in (("from_stage", from_stage), ("until", until)):
         if value is not None and value not in STAGES:
             raise ConfigError(f"{name} must be one of {', '.join(STAGES)}, got {value!r}")
+    if not study.calibrated:
+        raise ConfigError(
+            "no parameter to calibrate: every [parameters.<name>] table has screen = true",
+            hint=f"run `bayescal screen --apply {study.path}` to calibrate the influential "
+            "ones, or set screen = false on those to calibrate",
+        )
     ctx = prepare(study, options)
     needs = check_budget(study, ctx.measured, ctx.out)  # before any stage allocates
     tell = say or (lambda _: None)

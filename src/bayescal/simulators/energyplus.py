@@ -5,20 +5,25 @@ converted once to epJSON) for one parameter set and one forcing:
 
 1. the model is copied and edited as JSON: each calibration parameter sets
    one or more numeric fields of named objects (``Material AeratedConcrete
-   Conductivity``); ``Timestep``, ``HeatBalanceAlgorithm``, ``RunPeriod``,
-   ``SimulationControl``, ``Output:Variable`` and ``Output:SQLite`` are set
-   by the adapter;
+   Conductivity``); ``Timestep``, ``HeatBalanceAlgorithm``, ``RunPeriod``
+   and ``SimulationControl`` are set by the adapter, and the model's own
+   reports (``Output:Variable``, ``Output:Meter``, tables...) are replaced by
+   the requested series at every time step in ``eplusout.sql``
+   (:mod:`bayescal.simulators.energyplus_output`);
 2. every forcing series mapped to a ``Schedule:File`` is written as a
    one-year CSV with one row per EnergyPlus time step, and the weather comes
    from an EPW written from the forcing (:mod:`bayescal.simulators.epw`) or
    from a given file;
-3. EnergyPlus runs in a fresh temporary directory, in a child Python process
-   (one ``EnergyPlusAPI`` state per run, killed at ``timeout``);
+3. EnergyPlus runs in a fresh folder (under ``workdir``, or the system's
+   temporary folder), in a child Python process (one ``EnergyPlusAPI`` state
+   per run, killed at ``timeout``);
 4. ``eplusout.err`` is checked: any ``** Severe **`` or ``** Fatal **``
    message, or a run that did not complete successfully, raises
    :class:`~bayescal.errors.SimulatorError` with the first messages;
-5. the requested variables are read from ``eplusout.sql`` and put on the
-   forcing's clock.
+5. the requested variables and meters are read from ``eplusout.sql`` and put
+   on the forcing's clock: values at the clock instants, or sums or means
+   over the clock intervals (``aggregate``); then the run's folder is
+   deleted, unless ``keep_outputs``.
 
 Why a child process
 -------------------
@@ -86,8 +91,9 @@ from __future__ import annotations
 
 import calendar
 import copy
+import hashlib
 import json
-import sqlite3
+import shutil
 import tempfile
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
@@ -104,6 +110,12 @@ from bayescal.simulators.energyplus_model import (
     first_object,
     load_model,
     objects_of,
+)
+from bayescal.simulators.energyplus_output import (
+    OutputSpec,
+    parse_output,
+    read_output,
+    request_outputs,
 )
 from bayescal.simulators.energyplus_run import (
     check_errors,
@@ -173,25 +185,6 @@ class ScheduleInput:
     lead_steps: int = 0
 
 
-@dataclass(frozen=True)
-class OutputSpec:
-    """An EnergyPlus report variable returned as an output series.
-
-    Parameters
-    ----------
-    variable
-        Report variable name, e.g. ``"Surface Inside Face Temperature"``.
-    key
-        Key value (the surface, zone... name), case-insensitive.
-    scale
-        Factor applied to the values (``-1`` to flip a sign convention).
-    """
-
-    variable: str
-    key: str
-    scale: float = 1.0
-
-
 class EnergyPlusSimulator:
     """An EnergyPlus model run through ``pyenergyplus`` (see the module notes).
 
@@ -209,10 +202,13 @@ class EnergyPlusSimulator:
         Forcing series (glossary name) -> ``Schedule:File`` name, or a
         mapping ``{"schedule": name, "lead_steps": n}``.
     outputs
-        Output name -> ``(variable, key)`` or ``(variable, key, scale)``.
+        Output name -> ``(variable, key)``, ``(variable, key, scale)``, a
+        mapping ``{"variable", "key"}`` or ``{"meter"}`` (with optional
+        ``scale`` and ``aggregate``) or an :class:`OutputSpec`.
     weather
         ``"from-forcing"`` (an EPW written from the forcing, absent series
-        filled as in :mod:`bayescal.simulators.epw`) or the path of an EPW.
+        filled as in :mod:`bayescal.simulators.epw`) or the path of an EPW
+        (read once; its content travels with the simulator to the workers).
     timesteps_per_hour
         EnergyPlus time steps per hour, a divisor of 60; default: the model's
         ``Timestep``, at least 20 with the finite-difference algorithm. [1/h]
@@ -237,8 +233,13 @@ class EnergyPlusSimulator:
         library is loaded; the timeout is checked at each zone time step
         only; not for several runs at once from threads of one process).
     workdir
-        If given, runs happen in new subdirectories of it and are kept (for
-        debugging); otherwise in temporary directories that are removed.
+        Folder in which each run gets a new subfolder (default: the system's
+        temporary folder).
+    keep_outputs
+        Keep each run's folder (model, schedules, EnergyPlus's output files
+        and ``parameters.json``) instead of deleting it once its series are
+        read; for debugging. Only the requested series, on the study clock,
+        leave the run otherwise.
     """
 
     def __init__(
@@ -247,7 +248,7 @@ class EnergyPlusSimulator:
         *,
         parameters: Mapping[str, Any] | None = None,
         schedules: Mapping[str, str | Mapping[str, Any] | ScheduleInput] | None = None,
-        outputs: Mapping[str, Sequence[Any] | OutputSpec],
+        outputs: Mapping[str, Sequence[Any] | Mapping[str, Any] | OutputSpec],
         weather: str | Path = "from-forcing",
         timesteps_per_hour: int | None = None,
         algorithm: Literal["ConductionTransferFunction", "ConductionFiniteDifference"]
@@ -258,6 +259,7 @@ class EnergyPlusSimulator:
         timeout: float = 600.0,
         isolation: Literal["subprocess", "in-process"] = "subprocess",
         workdir: str | Path | None = None,
+        keep_outputs: bool = False,
     ) -> None:
         require_pyenergyplus()
         self._model_path = Path(model_path)
@@ -269,7 +271,7 @@ class EnergyPlusSimulator:
             find_object(self._model, "Schedule:File", spec.schedule)
         if not outputs:
             raise SimulatorError(f"{_WHO} needs at least one output, got {outputs!r}")
-        self._outputs = {n: _parse_output(n, o) for n, o in outputs.items()}
+        self._outputs = {n: parse_output(n, o) for n, o in outputs.items()}
         self._algorithm = _check_algorithm(algorithm)
         self._tph = _timesteps_per_hour(self._model, timesteps_per_hour, self._effective_algorithm)
         self._weather = weather if weather == "from-forcing" else Path(weather)
@@ -296,6 +298,15 @@ class EnergyPlusSimulator:
             )
         self._isolation = isolation
         self._workdir = None if workdir is None else Path(workdir)
+        self._keep_outputs = bool(keep_outputs)
+        # The weather file travels with the simulator (to worker processes and remote Dask
+        # workers, which need not see the same file system) and is written into each run.
+        self._weather_bytes = (
+            self._weather.read_bytes() if isinstance(self._weather, Path) else None
+        )
+        self._weather_sha256 = (
+            hashlib.sha256(self._weather_bytes).hexdigest() if self._weather_bytes else None
+        )
 
     @property
     def parameter_names(self) -> tuple[str, ...]:
@@ -351,17 +362,47 @@ class EnergyPlusSimulator:
         values = {**self._nominal, **{k: float(v) for k, v in parameters.items()}}
         if self._workdir is not None:
             self._workdir.mkdir(parents=True, exist_ok=True)
-            return self._run_in(
-                Path(tempfile.mkdtemp(prefix="run-", dir=self._workdir)), values, forcing
-            )
-        with tempfile.TemporaryDirectory(prefix="bayescal-eplus-") as tmp:
-            return self._run_in(Path(tmp), values, forcing)
+        folder = Path(tempfile.mkdtemp(prefix="bayescal-eplus-", dir=self._workdir))
+        try:
+            if self._keep_outputs:
+                (folder / "parameters.json").write_text(json.dumps(values), encoding="utf-8")
+            return self._run_in(folder, values, forcing)
+        finally:
+            if not self._keep_outputs:
+                shutil.rmtree(folder, ignore_errors=True)
+
+    def fingerprint(self) -> str:
+        """Hash of what decides the results (for the runner's cache).
+
+        The model's content, the targets and nominal values, schedules,
+        outputs, algorithm, time steps, warm-up and the weather file's content
+        enter; where the model or the weather file lie, where runs happen and
+        whether their folders are kept, the timeout and the isolation do not,
+        so moving a study or keeping outputs keeps its cached runs.
+        """
+        state = {
+            "model": self._model,
+            "targets": {n: [list(vars(t).values()) for t in ts] for n, ts in self._targets.items()},
+            "nominal": self._nominal,
+            "schedules": {n: list(vars(s).values()) for n, s in self._schedules.items()},
+            "outputs": {n: list(vars(o).values()) for n, o in self._outputs.items()},
+            "algorithm": self._algorithm,
+            "timesteps_per_hour": self._tph,
+            "weather": self._weather_sha256 or str(self._weather),
+            "warmup_days": self._warmup_days,
+            "min_warmup_days": self._min_warmup_days,
+            "records_per_hour": self._records_per_hour,
+        }
+        text = json.dumps(state, sort_keys=True, separators=(",", ":"), default=str)
+        return hashlib.sha256(text.encode("utf-8")).hexdigest()
 
     def _run_in(
         self, folder: Path, values: Mapping[str, float], forcing: Forcing
     ) -> dict[str, np.ndarray]:
         site = self._site()
-        clock = _Clock.make(forcing, site.time_zone, self._tph, self._warmup_days)
+        intervals = any(spec.aggregate != "point" for spec in self._outputs.values())
+        lookback = forcing.step if intervals else 0.0
+        clock = _Clock.make(forcing, site.time_zone, self._tph, self._warmup_days, lookback)
         model = copy.deepcopy(self._model)
         for name, targets in self._targets.items():
             for target in targets:
@@ -369,8 +410,9 @@ class EnergyPlusSimulator:
         self._configure(model, clock)
         for series, spec in self._schedules.items():
             _write_schedule(model, folder, spec, clock, clock.seconds, forcing[series])
-        if isinstance(self._weather, Path):
-            weather = self._weather
+        if self._weather_bytes is not None:
+            weather = folder / "weather.epw"
+            weather.write_bytes(self._weather_bytes)
         else:
             weather = write_epw(
                 folder / "weather.epw", forcing, site, records_per_hour=self._records_per_hour
@@ -384,8 +426,9 @@ class EnergyPlusSimulator:
         else:
             run_energyplus_in_process(arguments, self._timeout)
         check_errors(out / "eplusout.err", source=str(self._model_path))
+        sql = out / "eplusout.sql"
         return {
-            name: spec.scale * _read_series(out / "eplusout.sql", spec, clock)
+            name: read_output(sql, spec, clock.year, clock.seconds, forcing.step)
             for name, spec in self._outputs.items()
         }
 
@@ -418,14 +461,7 @@ class EnergyPlusSimulator:
             for building in objects_of(model, "Building").values():
                 building["minimum_number_of_warmup_days"] = int(self._min_warmup_days)
         model["RunPeriod"] = {"bayescal run period": clock.run_period()}
-        variables = model.setdefault("Output:Variable", {})
-        for name, spec in self._outputs.items():
-            variables[f"bayescal {name}"] = {
-                "key_value": spec.key,
-                "variable_name": spec.variable,
-                "reporting_frequency": "Timestep",
-            }
-        model["Output:SQLite"] = {"Output:SQLite 1": {"option_type": "Simple"}}
+        request_outputs(model, self._outputs)
 
 
 def paper_wall_simulator(
@@ -525,16 +561,6 @@ def _parse_schedule(series: str, spec: Any) -> ScheduleInput:
     )
 
 
-def _parse_output(name: str, spec: Any) -> OutputSpec:
-    if isinstance(spec, OutputSpec):
-        return spec
-    if isinstance(spec, Sequence) and not isinstance(spec, str) and len(spec) in (2, 3):
-        return OutputSpec(str(spec[0]), str(spec[1]), float(spec[2]) if len(spec) == 3 else 1.0)
-    raise SimulatorError(
-        f"output {name!r} must be (variable, key) or (variable, key, scale), got {spec!r}"
-    )
-
-
 def _check_algorithm(algorithm: str | None) -> str | None:
     if algorithm is not None and algorithm not in ALGORITHMS:
         raise SimulatorError(f"algorithm must be one of {ALGORITHMS}, got {algorithm!r}")
@@ -580,14 +606,17 @@ class _Clock:
     last_day: int
 
     @classmethod
-    def make(cls, forcing: Forcing, time_zone: float, tph: int, warmup_days: int) -> _Clock:
+    def make(
+        cls, forcing: Forcing, time_zone: float, tph: int, warmup_days: int, lookback: float = 0.0
+    ) -> _Clock:
+        """The calendar of a run; ``lookback`` [s]: the first sample's interval before it."""
         try:
             year = local_year(forcing, time_zone)
         except DataError as exc:
             raise SimulatorError(exc.message, hint=exc.hint) from None
         seconds = seconds_in_year(forcing, year, time_zone)
         step = 3600.0 / tph
-        begin = seconds[0] - warmup_days * _DAY - step
+        begin = seconds[0] - warmup_days * _DAY - max(step, lookback)
         if begin < 0:
             raise SimulatorError(
                 f"the run would start {-begin / _DAY:.2f} days before 1 January {year} "
@@ -647,30 +676,3 @@ def _write_schedule(
         interpolate_to_timestep="No",
         minutes_per_item=round(clock.step / 60.0),
     )
-
-
-def _read_series(sql: Path, spec: OutputSpec, clock: _Clock) -> np.ndarray:
-    """A report variable from ``eplusout.sql``, interpolated to the forcing instants."""
-    query = (
-        "SELECT t.Month, t.Day, t.Hour, t.Minute, r.Value FROM ReportData r "
-        "JOIN ReportDataDictionary d ON r.ReportDataDictionaryIndex = d.ReportDataDictionaryIndex "
-        "JOIN Time t ON r.TimeIndex = t.TimeIndex "
-        "WHERE upper(d.Name) = upper(?) AND upper(d.KeyValue) = upper(?) "
-        "AND (t.WarmupFlag IS NULL OR t.WarmupFlag = 0) ORDER BY t.TimeIndex"
-    )
-    if not sql.is_file():
-        raise SimulatorError("EnergyPlus wrote no eplusout.sql", source=str(sql.parent))
-    connection = sqlite3.connect(f"file:{sql}?mode=ro", uri=True)
-    try:
-        rows = np.array(connection.execute(query, (spec.variable, spec.key)).fetchall(), float)
-    finally:
-        connection.close()
-    if rows.size == 0:
-        raise SimulatorError(
-            f"EnergyPlus reported no {spec.variable!r} for key {spec.key!r}",
-            hint="check the variable name and key against eplusout.rdd of a run of the model",
-        )
-    month_start = np.cumsum([0] + [calendar.monthrange(clock.year, m)[1] for m in range(1, 12)])
-    day = month_start[rows[:, 0].astype(int) - 1] + rows[:, 1] - 1
-    times = day * _DAY + rows[:, 2] * 3600.0 + rows[:, 3] * 60.0
-    return np.interp(clock.seconds, times, rows[:, 4])

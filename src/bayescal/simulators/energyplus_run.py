@@ -140,12 +140,22 @@ def error_messages(err_text: str) -> list[str]:
     return messages
 
 
+#: Severe messages that do not fail a run: EnergyPlus's warm-up did not converge within its
+#: maximum number of warm-up days (a building with much thermal mass, a start in a cold
+#: spell). The run goes on from the last warm-up day, and the warm-up days that the adapter
+#: simulates before the first sample (``warmup_days``) settle the state before it is used.
+TOLERATED = ("CheckWarmupConvergence",)
+
+
 def check_errors(err_file: Path, *, source: str | None = None) -> None:
-    """Raise :class:`SimulatorError` unless ``eplusout.err`` shows a clean, complete run."""
+    """Raise :class:`SimulatorError` unless ``eplusout.err`` shows a clean, complete run.
+
+    Severe messages in :data:`TOLERATED` do not count.
+    """
     if not err_file.is_file():
         raise SimulatorError("EnergyPlus wrote no eplusout.err", source=source)
     text = err_file.read_text(encoding="utf-8", errors="replace")
-    messages = error_messages(text)
+    messages = [m for m in error_messages(text) if not any(t in m for t in TOLERATED)]
     completed = "EnergyPlus Completed Successfully" in text
     if messages or not completed:
         shown = (
@@ -154,6 +164,6 @@ def check_errors(err_file: Path, *, source: str | None = None) -> None:
         more = len(messages) - _MAX_MESSAGES
         raise SimulatorError(
             f"EnergyPlus run failed: {shown}" + (f" (+{more} more)" if more > 0 else ""),
-            hint="see eplusout.err of the run (pass workdir= to keep it)",
+            hint="see eplusout.err of the run (keep_outputs = true keeps it)",
             source=source,
         )

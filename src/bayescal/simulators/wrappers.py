@@ -1,10 +1,12 @@
-"""Simulators wrapped around another one: study parameter names, sensor models.
+"""Simulators wrapped around another one: study parameter names, sensor models, fixed values.
 
-Both forward the inner simulator's boundary conditions and outputs.
+All forward the inner simulator's boundary conditions and outputs.
 :class:`TargetedSimulator` exposes a simulator whose own parameters have
 fixed names (a box constant, a template placeholder) under the study's
 parameter names; :class:`SensorModel` passes outputs through calibrated
-sensors (``reading = gain * simulated + offset``).
+sensors (``reading = gain * simulated + offset``); :class:`FixedParameters`
+holds some parameters at given values (screening candidates at their
+nominal values while the others are calibrated).
 """
 
 from __future__ import annotations
@@ -17,7 +19,7 @@ import numpy as np
 from bayescal.errors import SimulatorError
 from bayescal.simulators.base import Derivable, Forcing, Simulator, check_parameters
 
-__all__ = ["SensorModel", "TargetedSimulator"]
+__all__ = ["FixedParameters", "SensorModel", "TargetedSimulator"]
 
 
 @dataclass(frozen=True)
@@ -123,3 +125,27 @@ class SensorModel(_Wrapped):
                 )
             out[output] = gain.get(output, 1.0) * np.asarray(out[output]) + offset.get(output, 0.0)
         return out
+
+
+@dataclass(frozen=True)
+class FixedParameters(_Wrapped):
+    """A simulator with some of its parameters held at given values.
+
+    Parameters
+    ----------
+    inner
+        The simulator.
+    fixed
+        Parameter name -> value it is held at (physical units); these names
+        are no longer parameters of the wrapper.
+    """
+
+    fixed: Mapping[str, float]
+
+    @property
+    def parameter_names(self) -> tuple[str, ...]:
+        return tuple(n for n in self.inner.parameter_names if n not in self.fixed)
+
+    def simulate(self, parameters: Mapping[str, float], forcing: Forcing) -> dict[str, np.ndarray]:
+        check_parameters(parameters, self.parameter_names, type(self.inner).__name__)
+        return self.inner.simulate({**self.fixed, **parameters}, forcing)

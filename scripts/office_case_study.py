@@ -1,0 +1,153 @@
+"""The office example at full size: screen, design, calibrate, report; with times and truth.
+
+The numbers of ``docs/case-studies.md`` (section "A whole building") come from
+this script. It copies the ``office`` example into ``out/case-studies/office``
+(as ``bayescal init office`` does), then runs what a modeller runs:
+
+1. ``bayescal screen --apply``: Morris elementary effects of the 21 candidates
+   (``[screening]``: 10 trajectories, 220 EnergyPlus runs); the proposed
+   parameters get ``screen = false``;
+2. ``bayescal run``: design (``[design] runs``), EnergyPlus runs, emulator,
+   calibration, predictions, report;
+
+and prints the screening ranks, the posterior against the hidden truth
+(:data:`make_office_example.TRUTH`; the other candidates are at their
+nominal values in the data), the Guideline 14 table (hourly and monthly,
+training and held-out weeks), the size of the emulator and the time of every
+step, as Markdown with ``--markdown``.
+
+Usage::
+
+    OPENBLAS_NUM_THREADS=1 python scripts/office_case_study.py [--fresh] [--jobs N]
+        [--backend processes|dask] [--scheduler ADDRESS] [--out DIR] [--markdown]
+
+Running it again reuses the cached EnergyPlus runs and every finished stage;
+``--fresh`` starts from an empty folder.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import shutil
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from bayescal.cli.progress import screening_text
+from bayescal.config import load_study
+from bayescal.examples import copy_example
+from bayescal.pipeline import Options, run
+from bayescal.pipeline.screen import screen
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO / "scripts"))
+
+from make_office_example import TRUTH  # noqa: E402
+
+
+def _markdown(frame: pd.DataFrame, digits: int = 4) -> str:
+    def cell(value: object) -> str:
+        if isinstance(value, float | np.floating):
+            return "–" if not np.isfinite(value) else f"{value:.{digits}g}"
+        return str(value)
+
+    head = [str(frame.index.name or "")] + [str(c) for c in frame.columns]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for index, row in frame.iterrows():
+        lines.append("| " + " | ".join([str(index)] + [cell(v) for v in row]) + " |")
+    return "\n".join(lines)
+
+
+def posterior_vs_truth(study_dir: Path) -> pd.DataFrame:
+    """Posterior mean and 95 % interval of each calibrated parameter, with its truth."""
+    study = load_study(study_dir)
+    summary = pd.read_csv(study.root / study.study.output_dir / "posterior-summary.csv")
+    summary = summary.set_index("parameter").loc[list(study.calibrated)]
+    nominal = {name: study.parameters[name].nominal for name in study.calibrated}
+    truth = {name: TRUTH.get(name, nominal[name]) for name in study.calibrated}
+    frame = pd.DataFrame(
+        {
+            "nominal": pd.Series(nominal),
+            "truth": pd.Series(truth),
+            "mean": summary["mean"],
+            "lower": summary["lower"],
+            "upper": summary["upper"],
+            "r_hat": summary["r_hat"],
+            "ess_bulk": summary["ess_bulk"],
+        }
+    )
+    frame["truth inside"] = np.where(
+        (frame["truth"] >= frame["lower"]) & (frame["truth"] <= frame["upper"]), "yes", "no"
+    )
+    frame.index.name = "parameter"
+    return frame
+
+
+def guideline14(study_dir: Path) -> pd.DataFrame:
+    """CV(RMSE), NMBE (hourly and monthly) of the nominal and calibrated models."""
+    study = load_study(study_dir)
+    metrics = pd.read_csv(study.root / study.study.output_dir / "metrics.csv")
+    cols = ["output", "model", "window", "n", "cv_rmse", "nmbe", "guideline14"]
+    cols += ["n_months", "cv_rmse_monthly", "nmbe_monthly", "guideline14_monthly"]
+    frame = metrics[metrics["model"].isin(["nominal", "calibrated"])][cols]
+    return frame.set_index("output")
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--out", type=Path, default=REPO / "out" / "case-studies" / "office")
+    parser.add_argument("--fresh", action="store_true", help="delete earlier results first")
+    parser.add_argument("--jobs", type=int, default=None, help="parallel EnergyPlus runs")
+    parser.add_argument("--backend", choices=["processes", "dask"], default=None)
+    parser.add_argument("--scheduler", default=None, help="Dask scheduler address")
+    parser.add_argument("--markdown", action="store_true", help="print Markdown tables")
+    args = parser.parse_args(argv)
+    folder: Path = args.out
+    if args.fresh and folder.exists():
+        shutil.rmtree(folder)
+    if not (folder / "study.toml").is_file():
+        copy_example("office", folder)
+    options = Options(backend=args.backend, jobs=args.jobs, scheduler=args.scheduler)
+    start = time.perf_counter()
+    screened = screen(load_study(folder), options=options, apply=True, say=print)
+    print(screening_text(screened.indices, screened.proposal))
+    print(f"screening: {screened.seconds:.1f} s ({screened.runs.n_run} EnergyPlus runs)")
+    res = run(load_study(folder), until="report", options=options, say=print)
+    total = time.perf_counter() - start
+    stages = json.loads((res.context.out / "stages.json").read_text(encoding="utf-8"))
+    times = {"screen": screened.seconds} | {k: float(v["seconds"]) for k, v in stages.items()}
+    em = res.emulator
+    sizes = ""
+    if em is not None:
+        a = em.assembled
+        sizes = (
+            f"emulator: R = {a.theta.shape[0]} runs x m* = {a.x.shape[0]} daily periods x "
+            f"{len(res.context.study.outputs.calibrate)} outputs x 24 h; p = {a.basis.p} "
+            f"basis vectors, {a.x.shape[1]} inputs x, {a.theta.shape[1]} parameters"
+        )
+    print()
+    print(sizes)
+    print("times [s]: " + ", ".join(f"{k} {v:.1f}" for k, v in times.items()))
+    print(f"end to end (this invocation): {total:.1f} s")
+    truth = posterior_vs_truth(folder)
+    g14 = guideline14(folder)
+    if args.markdown:
+        print()
+        print(_markdown(truth))
+        print()
+        print(_markdown(g14, digits=3))
+        print()
+        print(_markdown(pd.DataFrame({"seconds": pd.Series(times)}).rename_axis("step"), 4))
+    else:
+        print(truth.to_string())
+        print(g14.to_string())
+    print(f"report: {res.report}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,134 @@
+"""``bayescal screen`` end to end on the fixture wall: runs, files, page, proposal, --apply;
+and screening candidates held at their nominal values by ``run``."""
+
+from __future__ import annotations
+
+import shutil
+import tomllib
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+from click.testing import CliRunner
+
+from bayescal.cli import main
+from bayescal.config import build_simulator, load_study
+from bayescal.config.edit import set_screen_flags
+from bayescal.errors import ConfigError
+from bayescal.pipeline import Options, run
+from bayescal.pipeline.screen import screen, screening_statistic
+from bayescal.simulators.wrappers import FixedParameters
+from paths import FIXTURES
+
+pytest.importorskip("SALib", reason="screening needs SALib")
+
+SERIAL = Options(backend="serial", chains_backend="serial")
+EXTRA = """
+[parameters.k_fb]
+# a candidate: the boards' conductivity
+unit = "W/(m·K)"
+nominal = 0.0316
+prior = { distribution = "uniform", lower = 0.025, upper = 0.04 }
+targets = ["board_out.conductivity", "board_in.conductivity"]
+screen = true
+
+[parameters.d_fb]
+unit = "kg/m3"
+nominal = 116.6
+prior = { distribution = "uniform", lower = 116.0, upper = 117.0 }
+targets = ["board_out.density", "board_in.density"]
+screen = true
+
+[screening]
+trajectories = 4
+bootstrap = 100
+threshold = 0.05
+"""
+
+
+@pytest.fixture
+def study_dir(tmp_path: Path) -> Path:
+    target = tmp_path / "wall"
+    shutil.copytree(FIXTURES / "wall-study", target)
+    path = target / "study.toml"
+    path.write_text(path.read_text(encoding="utf-8") + EXTRA, encoding="utf-8")
+    return target
+
+
+def test_candidates_are_held_at_nominal_by_run(study_dir: Path) -> None:
+    study = load_study(study_dir)
+    assert study.calibrated == ("k_cb", "cp_cb", "cp_fb")
+    assert study.candidates == ("k_fb", "d_fb")
+    assert list(study.priors()) == ["k_cb", "cp_cb", "cp_fb"]
+    assert len(study.screening_priors()) == 5
+    simulator = build_simulator(study)
+    assert isinstance(simulator, FixedParameters)
+    assert simulator.parameter_names == ("k_cb", "cp_cb", "cp_fb")
+    assert build_simulator(study, screening=True).parameter_names[-2:] == ("k_fb", "d_fb")
+
+
+def test_screen_ranks_writes_and_applies(study_dir: Path) -> None:
+    study = load_study(study_dir)
+    res = screen(study, options=SERIAL, apply=True)
+    assert res.design.runs == 4 * 6
+    assert res.runs.n_failed == 0
+    folder = study_dir / "out" / "screening"
+    for name in ("screening.html", "morris.csv", "proposal.json", "design.csv"):
+        assert (folder / name).is_file(), name
+    table = pd.read_csv(folder / "morris.csv")
+    assert len(table) == 5
+    # the conductivities set the steady flux: the boards (R = 1.7 m²·K/W) and the concrete (1.25)
+    top = set(table.sort_values("rank")["parameter"].iloc[:2])
+    assert top == {"k_fb", "k_cb"}
+    # a density range of 1 kg/m³ in 116 cannot matter
+    assert table.set_index("parameter").loc["d_fb", "normalised"] < 0.05
+    assert "d_fb" not in res.proposal.selected
+    page = (folder / "screening.html").read_text(encoding="utf-8")
+    assert page.count("data:image/png;base64,") == 2
+    # --apply: proposed parameters calibrated, the others screened
+    raw = tomllib.loads((study_dir / "study.toml").read_text(encoding="utf-8"))["parameters"]
+    assert {n for n, p in raw.items() if not p.get("screen", False)} == set(res.proposal.selected)
+    assert (study_dir / "study.toml.bak").is_file()
+    assert "# a candidate: the boards' conductivity" in (study_dir / "study.toml").read_text()
+    # a second screen runs nothing: every run is in the cache
+    again = screen(load_study(study_dir), options=SERIAL)
+    assert again.runs.n_cached == again.design.runs
+    np.testing.assert_allclose(again.indices[0].mu_star, res.indices[0].mu_star)
+
+
+def test_screen_command(study_dir: Path) -> None:
+    result = CliRunner().invoke(main, ["screen", str(study_dir), "--backend", "serial", "-q"])
+    assert result.exit_code == 0, result.output
+    assert "screening.html" in result.output
+
+
+def test_run_needs_a_calibrated_parameter(study_dir: Path) -> None:
+    set_screen_flags(study_dir / "study.toml", dict.fromkeys(["k_cb", "cp_cb", "cp_fb"], True))
+    with pytest.raises(ConfigError, match="no parameter to calibrate"):
+        run(load_study(study_dir), options=SERIAL)
+
+
+def test_flags_are_added_where_missing(tmp_path: Path) -> None:
+    path = tmp_path / "study.toml"
+    path.write_text(
+        "[parameters.a]\nunit = '1'\n\n[parameters.b]  # b\nscreen = true # keep me\n"
+        "[parameters.b.prior]\nlower = 0\n",
+        encoding="utf-8",
+    )
+    assert set_screen_flags(path, {"a": True, "b": False}) == ["a", "b"]
+    text = path.read_text(encoding="utf-8")
+    assert "unit = '1'\nscreen = true\n\n[parameters.b]" in text
+    assert "screen = false  # keep me" in text
+    assert set_screen_flags(path, {"a": True}) == []
+    with pytest.raises(ConfigError, match=r"no \[parameters.<name>\] table"):
+        set_screen_flags(path, {"c": True})
+
+
+def test_statistics() -> None:
+    sim = np.array([[1.0, 2.0, 3.0], [2.0, 2.0, 2.0]])
+    obs = np.array([1.0, np.nan, 1.0])
+    np.testing.assert_allclose(screening_statistic(sim, obs, np.array([0, 2]), "mean"), [2, 2])
+    np.testing.assert_allclose(
+        screening_statistic(sim, obs, np.array([0, 1, 2]), "rmse"), [np.sqrt(2), 1.0]
+    )
