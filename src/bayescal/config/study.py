@@ -376,17 +376,27 @@ class DiscrepancySection(Section):
     realisations: int = field_doc("Posterior realisations b per update.", 50, default=50, ge=2)
     update_interval: int = field_doc("MCMC iterations between updates.", 100, default=100, ge=1)
     burn: int | None = field_doc(
-        "Burn-in iterations per chain of the discrepancy phase (Metropolis-within-Gibbs "
-        "with Delta updates, whatever [calibration] sampler says); [calibration] burn if "
-        "omitted. Set it when the calibration uses 'nuts', whose short runs are too short "
-        "for random-walk chains.",
+        "Burn-in iterations per chain of the discrepancy phase (lockstep chains of "
+        "Metropolis-within-Gibbs in whitened coordinates with Delta updates, whatever "
+        "[calibration] sampler says); [calibration] burn if omitted. Set it when the "
+        "calibration uses 'nuts', whose short runs are too short for these chains.",
         4000,
         default=None,
         ge=0,
     )
     samples: int | None = field_doc(
-        "Iterations kept per chain of the discrepancy phase; [calibration] samples if omitted.",
+        "Iterations kept per chain of the discrepancy phase before its first convergence "
+        "check; [calibration] samples if omitted.",
         10000,
+        default=None,
+        ge=1,
+    )
+    max_samples: int | None = field_doc(
+        "Most iterations kept per chain: the chains are extended from `samples` (by half "
+        "their length at a time) until every R-hat <= 1.01 and every bulk and tail ESS >= "
+        "400, at most to this length; a phase that stops short says so. 4 x `samples` "
+        "if omitted; equal to `samples`: no extension.",
+        40000,
         default=None,
         ge=1,
     )
@@ -530,16 +540,17 @@ class Study(Section):
         raise_problems(problems)
         return self
 
-    def discrepancy_lengths(self) -> tuple[int, int]:
-        """Burn-in and kept iterations per chain of the discrepancy phase.
+    def discrepancy_lengths(self) -> tuple[int, int, int]:
+        """Burn-in, kept iterations before the first convergence check and most kept
+        iterations per chain of the discrepancy phase.
 
-        ``[discrepancy] burn`` and ``samples`` where given, else ``[calibration]``'s.
+        ``[discrepancy] burn`` and ``samples`` where given, else ``[calibration]``'s;
+        ``max_samples`` where given (at least ``samples``), else 4 x ``samples``.
         """
         d, cal = self.discrepancy, self.calibration
-        return (
-            cal.burn if d.burn is None else d.burn,
-            cal.samples if d.samples is None else d.samples,
-        )
+        samples = cal.samples if d.samples is None else d.samples
+        most = 4 * samples if d.max_samples is None else max(d.max_samples, samples)
+        return (cal.burn if d.burn is None else d.burn, samples, most)
 
     def config_hash(self) -> str:
         """SHA-256 (hex) of the canonical JSON of the validated configuration.
