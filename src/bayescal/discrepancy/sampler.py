@@ -4,13 +4,16 @@ Why the old random walk mixed slowly
 ------------------------------------
 After an update the target of a chain leans towards the ``theta*`` it was
 estimated at (:mod:`bayescal.discrepancy.phase`), so the draws of one chain stay
-correlated across updates: on the box examples a chain needed tens of updates
+correlated across updates: on the box examples a chain needs tens of updates
 per effective draw, and four chains of Metropolis-within-Gibbs on the raw
 parameters (strongly correlated: the heat-loss coefficient, the capacity and
-the solar gains trade off) reached R-hat 1.17 after 4 x 30 000 sweeps. Two
-things help: cheap sweeps, so that many updates fit in the time, and
-proposals that fit the posterior's shape, so that a chain reaches each new
-target within a few sweeps.
+the solar gains trade off) reached R-hat 1.36 (co-heating) and 1.65
+(free-float) after 4 x 30 000 sweeps (docs/benchmarks.md). Two things help:
+cheap sweeps, so that many updates fit in the time, and proposals that fit
+the posterior's shape, so that a chain reaches each new target within a few
+sweeps. A parameter piled up at a bound (the box's r_ag) still mixes slowly:
+its ESS grows with the number of updates (a smaller ``update_interval``), not
+with the sweeps between them, and the phase says when it stopped short.
 
 How the chains run
 ------------------
