@@ -37,7 +37,7 @@ from bayescal.store.netcdf import (
     read_output_stack,
     write_dataset,
 )
-from bayescal.store.posterior import _output_noise
+from bayescal.store.posterior import output_noise_from_json
 
 __all__ = [
     "DISCREPANCY_FORMAT",
@@ -172,7 +172,7 @@ def load_discrepancy(path: str | os.PathLike[str]) -> Discrepancy:
         "algebra": str(ds.attrs["algebra"]),
     }
     if "aux_draws" in v:
-        noise = tuple(_output_noise(o) for o in json.loads(ds.attrs.get("noise", "[]")))
+        noise = tuple(output_noise_from_json(o) for o in json.loads(ds.attrs.get("noise", "[]")))
         aux_names = json.loads(ds.attrs["aux_names"])
         post = Posterior.build(**common, aux=v["aux_draws"], aux_names=aux_names, noise=noise)
         spec = json.loads(ds.attrs["fixed"])
