@@ -271,7 +271,8 @@ def _say_discrepancy_mixing(r: _Runner, disc: Discrepancy) -> None:
         text = (
             "the difference-process phase did NOT converge (R-hat <= 1.01 and bulk and tail "
             "ESS >= 400 not reached within [discrepancy] max_samples); its theta* draws and "
-            "Delta are unreliable: raise max_samples or burn"
+            "Delta are unreliable: raise max_samples, or lower update_interval (more updates "
+            "of Delta per sweep mix a slow parameter faster)"
         )
         r.logger.warning("discrepancy: %s", text)
         r.say(f"WARNING: {text}")
