@@ -175,13 +175,15 @@ def test_discrepancy_and_report_through_the_pipeline(tmp_path: Path) -> None:
     text = path.read_text(encoding="utf-8")
     path.write_text(
         text + "\n[discrepancy]\nenabled = true\nrealisations = 20\nupdate_interval = 50\n"
-        "burn = 300\nsamples = 500\n",
+        "burn = 300\nsamples = 500\nmax_samples = 500\n",
         "utf-8",
     )
     res = run(load_study(folder), options=SERIAL)
     assert res.discrepancy is not None
-    # The discrepancy phase's own chain lengths, not [calibration]'s 400 + 600.
+    # The discrepancy phase's own chain lengths, not [calibration]'s 400 + 600 (not
+    # extended: max_samples = samples).
     assert res.discrepancy.posterior.draws.shape[:2] == (4, 500)
+    assert res.discrepancy.converged is not None
     assert res.predictions is not None
     ds = res.predictions.dataset
     for name in ("delta", "corrected", "corrected_lower", "corrected_upper"):

@@ -5,7 +5,11 @@ was split into modules (issue 14); the emulator key and those after it changed
 with issue 15 (one standardisation scale per output by default, error models
 and the stored observation model) and with issue 18 (the ``[emulator] training``
 key, default ``"map"``: the emulator is trained by the gradient MAP search),
-changes meant and stated in the release notes. A change of a key makes every
+changes meant and stated in the release notes; the discrepancy key and those
+after it changed again with the difference-process sampler
+(``[discrepancy] max_samples``: lockstep whitened chains extended until they
+converge, whose draws differ from the old random walk's, so old results must
+not be reused). A change of a key makes every
 existing output folder recompute that stage and all later ones; if a change is
 meant, say so in the release notes and update the pins.
 """
@@ -25,9 +29,9 @@ WALL_KEYS = {
     "simulate": "5aec5b7637357200c8d3fc1fccce44ff078c2374c66f6b423e65a0c82c1c0537",
     "emulator": "aec6a64105d714baa8fd34c4c8414fa45d3afefd18331a5e502c54d06014f92c",
     "calibrate": "88c417f8e39707fcc8b262757a315797d0ee1a4d0669b9692c951802c1c8310f",
-    "discrepancy": "aa0616f513b82484d6438c928b6872c9b5866befd8e7694087dcf6a8fc08b44b",
-    "predict": "22fa5d773254642889da99e61a8823eeda29b6dcf88ae25a1805cc4d65c85a0c",
-    "report": "0ab360d77ea985945dccfd26d5e2aec3447d59f5ccbea499ba34f4094bd7d0bf",
+    "discrepancy": "d23d03d48f3a0e1baffaefab043c28e1a4e40c7d39faeb15fe06cdb0d9044c5e",
+    "predict": "43d3475d0c38b4ebeaf63201e692fb7faab31ed8196cc8cbccb4cb95b5140b7e",
+    "report": "6b2bcd56a5b772daefa881e37881d00a0dbb3372dc8882de05f2215b354258a1",
 }
 
 

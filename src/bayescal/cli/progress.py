@@ -213,7 +213,12 @@ def mcmc_bar(quiet: bool) -> Callable[[str, int], tuple[Tick, Callable[[], None]
         bar = tqdm(total=total, desc=label, unit="it", disable=quiet, mininterval=0.5)
 
         def tick(done: int) -> None:
-            bar.update(max(0, min(done, total) - bar.n))
+            # A phase that extends its chains past the planned total (the difference
+            # process, until it converges) grows the bar instead of sitting at 100 %.
+            if done > (bar.total or 0):
+                bar.total = done
+                bar.refresh()
+            bar.update(max(0, done - bar.n))
 
         return tick, bar.close
 

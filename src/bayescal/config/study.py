@@ -9,8 +9,8 @@ its key path, the value received and what was expected, on one line
 
 This module holds :class:`Study`, the small sections (``[study]``,
 ``[outputs]``, ``[periods]``, ``[design]``, ``[emulator]``,
-``[calibration]``, ``[discrepancy]``, ``[predict]``, ``[runner]``) and the
-checks across sections; ``[data]``, ``[parameters]``, ``[simulator]`` and
+``[calibration]``, ``[predict]``, ``[runner]``) and the checks across
+sections; ``[data]``, ``[parameters]``, ``[simulator]``, ``[discrepancy]`` and
 ``[screening]`` have modules of their own in :mod:`bayescal.config`.
 """
 
@@ -44,6 +44,7 @@ from bayescal.config.base import (
     resolve_path,
 )
 from bayescal.config.data import DataSection
+from bayescal.config.discrepancy import DiscrepancySection
 from bayescal.config.messages import format_errors
 from bayescal.config.parameters import DerivedSpec, Parameter
 from bayescal.config.screening import ScreeningSection
@@ -371,29 +372,6 @@ class CalibrationSection(Section):
     )
 
 
-class DiscrepancySection(Section):
-    """``[discrepancy]``: the difference process Delta(x) (the paper's eqs. 18–25)."""
-
-    enabled: bool = field_doc("Estimate Delta(x).", True, default=False)
-    realisations: int = field_doc("Posterior realisations b per update.", 50, default=50, ge=2)
-    update_interval: int = field_doc("MCMC iterations between updates.", 100, default=100, ge=1)
-    burn: int | None = field_doc(
-        "Burn-in iterations per chain of the discrepancy phase (Metropolis-within-Gibbs "
-        "with Delta updates, whatever [calibration] sampler says); [calibration] burn if "
-        "omitted. Set it when the calibration uses 'nuts', whose short runs are too short "
-        "for random-walk chains.",
-        4000,
-        default=None,
-        ge=0,
-    )
-    samples: int | None = field_doc(
-        "Iterations kept per chain of the discrepancy phase; [calibration] samples if omitted.",
-        10000,
-        default=None,
-        ge=1,
-    )
-
-
 class PredictSection(Section):
     """``[predict]``: calibrated predictions on the training and test windows."""
 
@@ -566,16 +544,17 @@ class Study(Section):
         raise_problems(problems)
         return self
 
-    def discrepancy_lengths(self) -> tuple[int, int]:
-        """Burn-in and kept iterations per chain of the discrepancy phase.
+    def discrepancy_lengths(self) -> tuple[int, int, int]:
+        """Burn-in, kept iterations before the first convergence check and most kept
+        iterations per chain of the discrepancy phase.
 
-        ``[discrepancy] burn`` and ``samples`` where given, else ``[calibration]``'s.
+        ``[discrepancy] burn`` and ``samples`` where given, else ``[calibration]``'s;
+        ``max_samples`` where given (at least ``samples``), else 4 x ``samples``.
         """
         d, cal = self.discrepancy, self.calibration
-        return (
-            cal.burn if d.burn is None else d.burn,
-            cal.samples if d.samples is None else d.samples,
-        )
+        samples = cal.samples if d.samples is None else d.samples
+        most = 4 * samples if d.max_samples is None else max(d.max_samples, samples)
+        return (cal.burn if d.burn is None else d.burn, samples, most)
 
     def config_hash(self) -> str:
         """SHA-256 (hex) of the canonical JSON of the validated configuration.

@@ -3,9 +3,15 @@
 ``Delta = observation - model`` (``y* = f(theta*, x) + Delta(x) + eps``, eq. 18;
 the paper's eq. 25 writes the opposite sign). Modules:
 
-* :mod:`~bayescal.discrepancy.phase` -- the empirical moments of eq. 25, the
-  generalised least squares of eqs. 20–24 and the MCMC over theta* with the
-  periodic update (standardised units);
+* :mod:`~bayescal.discrepancy.moments` -- the empirical moments of eq. 25 and
+  the generalised least squares of eqs. 20–24 with each output's measurement
+  error (standardised units);
+* :mod:`~bayescal.discrepancy.phase` -- what stays fixed in the phase, the
+  periodic update and the scalar target of theta* between updates;
+* :mod:`~bayescal.discrepancy.batched` -- that target's likelihood (eq. 19) for
+  all chains at once;
+* :mod:`~bayescal.discrepancy.sampler` -- the chains: lockstep, whitened, as
+  long as convergence needs, with checkpoints;
 * :mod:`~bayescal.discrepancy.priors` -- priors of theta* from the calibration
   posterior (well identified: moment-matched Beta; piled up at a bound:
   Beta(1, 2));

@@ -9,15 +9,17 @@ changes sign, the covariance ``D_i`` of eq. 25 is the same.
 
 What :func:`estimate_discrepancy` does
 --------------------------------------
-1. Fixes the hyperparameters at the emulator's MAP and ``lambda``, ``lambda*`` at
-   their calibration posterior means; only ``theta*`` moves.
-2. Runs ``n_chains`` chains of :class:`~bayescal.discrepancy.phase.EmpiricalDeltaSampler`
-   (chains started at calibration draws): every ``update_interval`` sweeps it
-   draws ``realisations`` model realisations at the current ``theta*``,
+1. Fixes the hyperparameters at the emulator's MAP and ``lambda``, every
+   output's ``lambda*`` and AR(1) coefficient and an in-likelihood discrepancy's
+   variance at their calibration posterior means
+   (:class:`~bayescal.discrepancy.phase.FixedPrecisions`); only ``theta*`` moves.
+2. Runs ``n_chains`` chains in lockstep from calibration draws
+   (:mod:`bayescal.discrepancy.sampler`): every ``update_interval`` sweeps each
+   chain draws ``realisations`` model realisations at its current ``theta*``,
    re-estimates ``Delta_i``, ``A_i``, ``w*`` and ``B_j`` (eqs. 20–25) and samples
-   ``theta*`` under eq. 19 plus the term of eq. 23
-   (:mod:`bayescal.discrepancy.phase`). Priors: :func:`default_priors` unless
-   given.
+   ``theta*`` under eq. 19 plus the term of eq. 23, in whitened coordinates,
+   for at least ``n_draws`` kept sweeps and until R-hat and ESS pass (at most
+   ``max_draws``). Priors: :func:`default_priors` unless given.
 3. Estimates ``Delta_i`` per training period as the observation minus the
    emulator's mean prediction averaged over (up to ``delta_draws``, thinned)
    theta* draws of this phase, in physical units: the posterior expectation
@@ -40,6 +42,7 @@ negative if it makes things worse).
 from __future__ import annotations
 
 import math
+import os
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Literal
@@ -47,18 +50,20 @@ from typing import TYPE_CHECKING, Literal
 import numpy as np
 from numpy.typing import ArrayLike
 
-from bayescal.calibration.kron import Kind
 from bayescal.calibration.posterior import Posterior, check_priors
 from bayescal.calibration.target import emulator_algebra
 from bayescal.design import Prior
+from bayescal.discrepancy.batched import BatchedDelta
 from bayescal.discrepancy.delta_gp import MAX_COMPONENTS, DeltaGP, Trend, fit_delta_gp
-from bayescal.discrepancy.phase import DeltaPhase, EmpiricalDeltaSampler
+from bayescal.discrepancy.moments import ErrorCovariance
+from bayescal.discrepancy.phase import DeltaPhase, FixedPrecisions
 from bayescal.discrepancy.priors import default_priors
+from bayescal.discrepancy.sampler import DeltaSettings, Whitening, checkpoint_file, run_delta_chains
 from bayescal.emulator.assemble import Assembled, OutputStack
 from bayescal.emulator.gp import Emulator
 from bayescal.emulator.kernel import FloatArray
+from bayescal.emulator.noise import ObservationModel
 from bayescal.errors import ConfigError, DataError
-from bayescal.mcmc.chains import ChainBackend, run_chains
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -82,13 +87,20 @@ class Discrepancy:
     gp
         The GP of ``Delta`` over ``x`` (standardised).
     posterior
-        theta* draws of the discrepancy phase (``lambda`` and ``lambda*`` fixed).
-    lam, lam_star
-        The fixed precisions ``lambda`` and ``lambda*``. [-]
+        theta* draws of the discrepancy phase; its ``aux`` holds the fixed
+        precisions and error parameters (the calibration's layout, constant).
+    fixed
+        ``lambda``, the ``lambda*``, AR(1) coefficients and in-likelihood
+        discrepancy variances held fixed in the phase. [-]
     realisations
         Model realisations per update (``b`` of eq. 25).
     update_interval
         Sweeps between two updates of ``Delta``.
+    updates
+        Updates of ``Delta`` per chain (burn-in included).
+    converged
+        Whether the phase's chains met R-hat <= 1.01 and bulk and tail ESS >= 400
+        on every parameter (``None``: not recorded, e.g. an older file).
     """
 
     outputs: OutputStack
@@ -96,10 +108,21 @@ class Discrepancy:
     delta: FloatArray
     gp: DeltaGP
     posterior: Posterior
-    lam: float
-    lam_star: float
+    fixed: FixedPrecisions
     realisations: int
     update_interval: int
+    updates: int = 0
+    converged: bool | None = None
+
+    @property
+    def lam(self) -> float:
+        """The fixed ``lambda``. [-]"""
+        return self.fixed.lam
+
+    @property
+    def lam_star(self) -> float:
+        """The fixed ``lambda*`` of the first output. [-]"""
+        return self.fixed.lam_star[0]
 
     def predict(self, x_new: ArrayLike) -> tuple[FloatArray, FloatArray]:
         """Predictive mean and variance of ``Delta`` at new periods, in physical units.
@@ -215,15 +238,13 @@ def _positive_int(value: object, least: int, what: str, why: str) -> int:
 
 
 def _check_settings(
-    realisations: int, update_interval: int, n_chains: int, n_burn: int, n_draws: int, backend: str
+    realisations: int, update_interval: int, n_chains: int, n_burn: int, n_draws: int
 ) -> None:
     _positive_int(realisations, 2, "realisations", "eq. 25 averages over model realisations")
     _positive_int(update_interval, 1, "update_interval", "sweeps between updates of Delta")
     _positive_int(n_chains, 1, "n_chains", "independent chains")
     _positive_int(n_burn, 0, "n_burn", "burn-in sweeps per chain")
     _positive_int(n_draws, 4, "n_draws", "kept sweeps per chain; diagnostics need 4")
-    if backend not in ("processes", "serial"):
-        raise ConfigError(f"backend must be 'processes' or 'serial', got {backend!r}")
 
 
 def _check_match(emulator: Emulator, assembled: Assembled, posterior: Posterior) -> None:
@@ -263,13 +284,6 @@ def _starts(posterior: Posterior, n_chains: int, rng: np.random.Generator) -> Fl
     return np.clip(flat[picks], 1e-9, 1.0 - 1e-9)
 
 
-def _scales(posterior: Posterior) -> tuple[float, ...]:
-    """Initial logit-scale proposal widths: 2.4 posterior SDs of ``logit(u)``."""
-    u = np.clip(posterior.unit_draws.reshape(-1, len(posterior.names)), 1e-9, 1.0 - 1e-9)
-    sd = np.std(np.log(u) - np.log1p(-u), axis=0)
-    return tuple(float(v) for v in np.clip(2.4 * sd, 1e-3, 2.0))
-
-
 def _thinned(posterior: Posterior, n: int) -> FloatArray:
     flat = posterior.unit_draws.reshape(-1, len(posterior.names))
     return flat[np.unique(np.linspace(0, flat.shape[0] - 1, min(n, flat.shape[0])).astype(int))]
@@ -285,6 +299,20 @@ def _delta_std(emulator: Emulator, y_star: FloatArray, theta_unit: FloatArray) -
     return y_star - model / theta_unit.shape[0]
 
 
+def _delta_variances(
+    emulator: Emulator, observations: ObservationModel, fixed: FixedPrecisions
+) -> FloatArray | None:
+    """Per-basis variance ``r_o tau_j^-1`` of an in-likelihood discrepancy, or ``None``."""
+    if not observations.delta_outputs:
+        return None
+    variances = np.array([k.variance for k in emulator.kernels])
+    out = np.zeros(variances.size)
+    for q, r in zip(observations.delta_outputs, fixed.delta_rel, strict=True):
+        bases = list(observations.outputs[q].bases)
+        out[bases] = r * variances[bases]
+    return out
+
+
 def estimate_discrepancy(
     emulator: Emulator,
     assembled: Assembled,
@@ -296,10 +324,11 @@ def estimate_discrepancy(
     n_chains: int = 4,
     n_burn: int = 1000,
     n_draws: int = 1000,
+    max_draws: int | None = None,
     seed: int = 0,
-    backend: ChainBackend = "processes",
     callback: Callable[[int], None] | None = None,
-    algebra: Kind = "kronecker",
+    checkpoint_dir: str | os.PathLike[str] | None = None,
+    checkpoint_seconds: float = 30.0,
     max_components: int = MAX_COMPONENTS,
     trend: Trend = "constant",
     delta_draws: int = 200,
@@ -311,10 +340,10 @@ def estimate_discrepancy(
     emulator
         The trained emulator (hyperparameters fixed at its MAP).
     assembled
-        The assembled data it was trained on (``Y*``, ``W*``, ``x``).
+        The assembled data it was trained on (``Y*``, ``x``, the outputs' error models).
     posterior
-        The calibration posterior (starting points, ``lambda``, ``lambda*`` and
-        the default priors).
+        The calibration posterior (starting points, the fixed precisions and
+        error parameters, the default priors).
     priors
         Parameter name -> prior on the design's bounds; default
         :func:`bayescal.discrepancy.priors.default_priors`.
@@ -323,15 +352,20 @@ def estimate_discrepancy(
     update_interval
         Sweeps between two updates of ``Delta``, ``A``, ``w*`` and ``B``.
     n_chains, n_burn, n_draws
-        Chains, burn-in sweeps (adapted, discarded) and kept sweeps per chain.
+        Chains (run in lockstep), burn-in sweeps (discarded) and kept sweeps
+        per chain before the first convergence check.
+    max_draws
+        Most kept sweeps per chain: the chains are extended until R-hat <= 1.01
+        and bulk and tail ESS >= 400 or this length (default ``n_draws``: no
+        extension).
     seed
         Root seed; chain ``k`` uses ``SeedSequence(seed).spawn(n_chains)[k]``.
-    backend
-        ``"processes"`` (chains in worker processes) or ``"serial"``.
     callback
         Progress: called with the sweeps completed over all chains.
-    algebra
-        ``"kronecker"`` (fast, default) or ``"dense"`` (reference) likelihood.
+    checkpoint_dir, checkpoint_seconds
+        Folder of the phase's snapshot (``delta.npz``) and the least wall time
+        between two snapshots [s]; a killed phase resumes from it with the
+        draws of an uninterrupted run.
     max_components
         Most principal components of ``Delta`` given a GP.
     trend
@@ -344,38 +378,60 @@ def estimate_discrepancy(
     -------
     Discrepancy
     """
-    _check_settings(realisations, update_interval, n_chains, n_burn, n_draws, backend)
+    _check_settings(realisations, update_interval, n_chains, n_burn, n_draws)
+    settings = DeltaSettings(
+        n_burn=n_burn,
+        n_draws=n_draws,
+        max_draws=n_draws if max_draws is None else max_draws,
+        update_interval=update_interval,
+    )
     _check_match(emulator, assembled, posterior)
     prior_map = default_priors(posterior) if priors is None else check_priors(assembled, priors)
-    lam, lam_star = float(np.mean(posterior.lam)), float(np.mean(posterior.lam_star))
-    alg = emulator_algebra(emulator, assembled.w_star, algebra)
+    observations = assembled.observations
+    fixed = FixedPrecisions.from_posterior(posterior, observations)
+    noise = ErrorCovariance.of(observations, fixed.lam_star, fixed.phi)
+    delta = _delta_variances(emulator, observations, fixed)
+    alg = emulator_algebra(emulator, assembled.w_star, "kronecker")
     phase = DeltaPhase(
-        emulator, assembled.y_star_std, alg, list(prior_map.values()), lam, lam_star, realisations
+        emulator,
+        assembled.y_star_std,
+        alg,
+        list(prior_map.values()),
+        fixed.lam,
+        noise,
+        realisations,
+        delta,
     )
+    grid = alg.stacked_grid()
+    assert grid is not None  # the Kronecker back end always has one
+    likelihood = BatchedDelta(grid, phase.a, delta)
     rng = np.random.default_rng([seed, 4])
-    sampler = EmpiricalDeltaSampler(n_burn, update_interval, _scales(posterior))
-    chains = run_chains(
-        sampler,
+    chains = run_delta_chains(
         phase,
+        likelihood,
         _starts(posterior, n_chains, rng),
-        n_draws,
-        seed=seed,
+        Whitening.of(posterior.unit_draws),
+        settings,
+        seed,
         names=assembled.parameter_names,
-        backend=backend,
         callback=callback,
+        checkpoint=None
+        if checkpoint_dir is None
+        else checkpoint_file(checkpoint_dir, checkpoint_seconds),
     )
-    shape = chains.draws.shape[:2]
-    fixed = np.full((shape[0], 2), np.nan)
+    shape = chains.unit_draws.shape[:2]
+    values = fixed.values()
     post = Posterior.build(
         names=assembled.parameter_names,
         priors=prior_map,
-        unit_draws=chains.draws,
-        lam=np.full(shape, lam),
-        lam_star=np.full(shape, lam_star),
+        unit_draws=chains.unit_draws,
         log_density=chains.log_density,
-        acceptance=np.hstack([chains.acceptance, fixed]),
+        acceptance=np.hstack([chains.acceptance, np.full((shape[0], values.size), np.nan)]),
         seed=int(seed),
-        algebra=algebra,
+        algebra="kronecker",
+        aux=np.broadcast_to(values, (*shape, values.size)).copy(),
+        aux_names=posterior.aux_names,
+        noise=posterior.noise,
     )
     delta_std = _delta_std(emulator, assembled.y_star_std, _thinned(post, delta_draws))
     gp = fit_delta_gp(delta_std, emulator.x, max_components=max_components, trend=trend)
@@ -385,8 +441,9 @@ def estimate_discrepancy(
         delta=delta_std * emulator.outputs.sd[:, None],
         gp=gp,
         posterior=post,
-        lam=lam,
-        lam_star=lam_star,
+        fixed=fixed,
         realisations=int(realisations),
         update_interval=int(update_interval),
+        updates=chains.updates,
+        converged=chains.converged,
     )

@@ -26,6 +26,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from bayescal.atomic import read_npz
 from bayescal.calibration.posterior import Posterior
 from bayescal.config import Study
@@ -349,11 +351,37 @@ def _discrepancy(r: _Runner, em: EmulatorResult, post: Posterior) -> Discrepancy
     if ok:
         return found
     start = time.perf_counter()
-    disc = discrepancy_stage(r.ctx, em, post)
+    disc = discrepancy_stage(r.ctx, em, post, checkpoint_dir=r.checkpoints("discrepancy"))
     assert disc is not None  # enabled above
     discrepancy_store.save_discrepancy(disc, path)
+    _say_discrepancy_mixing(r, disc)
     r.finish("discrepancy", [discrepancy_store.FILE], start)
     return disc
+
+
+def _say_discrepancy_mixing(r: _Runner, disc: Discrepancy) -> None:
+    """The phase's length and worst diagnostics; loud when it did not converge."""
+    post = disc.posterior
+    diag = post.diagnostics
+    t = len(post.names)
+    chains, kept = post.unit_draws.shape[:2]
+    r.say(
+        f"discrepancy: {chains} chains x {kept} kept draws, {disc.updates} updates of Delta "
+        f"per chain; worst R-hat {np.nanmax(diag.rhat[:t]):.3f}, smallest bulk ESS "
+        f"{np.nanmin(diag.ess_bulk[:t]):.0f}, tail ESS {np.nanmin(diag.ess_tail[:t]):.0f}"
+    )
+    if disc.converged is False:
+        text = (
+            "the difference-process phase did NOT converge (R-hat <= 1.01 and bulk and tail "
+            "ESS >= 400 not reached within [discrepancy] max_samples); its theta* draws and "
+            "Delta are unreliable: raise max_samples, or lower update_interval (more updates "
+            "of Delta per sweep mix a slow parameter faster)"
+        )
+        r.logger.warning("discrepancy: %s", text)
+        r.say(f"WARNING: {text}")
+    for w in diag.warnings:
+        r.logger.warning("discrepancy: %s", w)
+        r.say(f"warning: {w}")
 
 
 def _predictions(

@@ -325,15 +325,25 @@ def derived_draws(ctx: Context, posterior: Posterior) -> dict[str, Derived]:
     return out
 
 
-def discrepancy_stage(ctx: Context, em: EmulatorResult, posterior: Posterior) -> Discrepancy | None:
-    """The difference process (``[discrepancy] enabled``), else ``None``."""
+def discrepancy_stage(
+    ctx: Context,
+    em: EmulatorResult,
+    posterior: Posterior,
+    checkpoint_dir: Path | None = None,
+) -> Discrepancy | None:
+    """The difference process (``[discrepancy] enabled``), else ``None``.
+
+    The chains run in lockstep in this process (whatever the chains backend).
+    The progress total is the length of the first convergence check; chains
+    that are extended past it keep counting.
+    """
     section = ctx.study.discrepancy
     if not section.enabled:
         return None
     from bayescal.discrepancy import estimate_discrepancy
 
     cal = ctx.study.calibration
-    n_burn, n_draws = ctx.study.discrepancy_lengths()
+    n_burn, n_draws, max_draws = ctx.study.discrepancy_lengths()
     tick, close = _mcmc_tick(ctx, "discrepancy", cal.chains * (n_burn + n_draws))
     try:
         return estimate_discrepancy(
@@ -345,17 +355,14 @@ def discrepancy_stage(ctx: Context, em: EmulatorResult, posterior: Posterior) ->
             n_chains=cal.chains,
             n_burn=n_burn,
             n_draws=n_draws,
+            max_draws=max_draws,
             seed=ctx.seed("discrepancy"),
-            backend=_plain_backend(ctx.options.chains_backend),  # type: ignore[arg-type]
             callback=tick,
+            checkpoint_dir=checkpoint_dir,
+            checkpoint_seconds=ctx.options.checkpoint_seconds,
         )
     finally:
         close()
-
-
-def _plain_backend(backend: str) -> str:
-    """``"auto"`` as ``"processes"``, for a stage that chooses no backend itself."""
-    return "processes" if backend == "auto" else backend
 
 
 @dataclass(frozen=True)

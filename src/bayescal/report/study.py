@@ -92,10 +92,11 @@ def report_settings(
         "seed": s.study.seed,
     }
     if s.discrepancy.enabled:
-        burn, kept = s.discrepancy_lengths()
+        burn, kept, most = s.discrepancy_lengths()
+        longer = "" if most == kept else f", extended up to {most} until converged"
         out["discrepancy MCMC"] = (
-            f"Metropolis-within-Gibbs with Delta updates, {s.calibration.chains} chains x "
-            f"({burn} + {kept})"
+            f"lockstep whitened Metropolis-within-Gibbs with Delta updates, "
+            f"{s.calibration.chains} chains x ({burn} + {kept}{longer})"
         )
     if emulator is not None:
         out["basis vectors p"] = emulator.basis.p

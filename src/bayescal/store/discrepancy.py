@@ -4,8 +4,9 @@ One ``xarray.Dataset`` (HDF5 through ``h5netcdf``, as the other artefacts)
 holds the estimate ``delta`` (physical units), the standardisation, the GP of
 ``Delta`` with its factorised covariances (so that a loaded discrepancy
 predicts bit for bit what the saved one did), the theta* draws of the phase
-(normalised, with ``lambda``, ``lambda*``, log density and acceptance) and, in
-the attributes, names, priors, seeds and settings. Variables carry
+(normalised, with the fixed precisions and error parameters ``aux``, log
+density and acceptance) and, in the attributes, names, priors, seeds,
+settings and whether the phase converged. Variables carry
 ``description`` attributes, and ``units`` where they have one unit. The write
 goes through :func:`bayescal.atomic.atomic_write_path` (temporary file, fsync,
 rename).
@@ -13,6 +14,7 @@ rename).
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 from pathlib import Path
@@ -25,6 +27,7 @@ from bayescal.calibration.posterior import Posterior
 from bayescal.design import prior_from_spec
 from bayescal.discrepancy.delta_gp import DeltaGP
 from bayescal.discrepancy.model import Discrepancy
+from bayescal.discrepancy.phase import FixedPrecisions
 from bayescal.store.netcdf import (
     DIMENSIONLESS,
     check_format,
@@ -34,6 +37,7 @@ from bayescal.store.netcdf import (
     read_output_stack,
     write_dataset,
 )
+from bayescal.store.posterior import output_noise_from_json
 
 __all__ = [
     "DISCREPANCY_FORMAT",
@@ -70,8 +74,7 @@ def discrepancy_dataset(d: Discrepancy, config_hash: str = "") -> xr.Dataset:
         "std_mean": (("sample",), d.outputs.mean),
         "std_sd": (("sample",), d.outputs.sd),
         "unit_draws": (("chain", "draw", "parameter"), post.unit_draws),
-        "lam": (("chain", "draw"), post.lam),
-        "lam_star": (("chain", "draw"), post.lam_star),
+        "aux_draws": (("chain", "draw", "aux"), post.aux),
         "log_density": (("chain", "draw"), post.log_density),
         "acceptance": (("chain", "coordinate"), post.acceptance),
     }
@@ -86,10 +89,13 @@ def discrepancy_dataset(d: Discrepancy, config_hash: str = "") -> xr.Dataset:
         "priors": json.dumps({n: p.spec() for n, p in post.priors.items()}),
         "seed": post.seed,
         "algebra": post.algebra,
-        "lam_fixed": d.lam,
-        "lam_star_fixed": d.lam_star,
+        "aux_names": json.dumps(list(post.aux_names)),
+        "noise": json.dumps([dataclasses.asdict(o) for o in post.noise]),
+        "fixed": json.dumps(dataclasses.asdict(d.fixed)),
         "realisations": d.realisations,
         "update_interval": d.update_interval,
+        "updates": d.updates,
+        "converged": "unknown" if d.converged is None else str(bool(d.converged)).lower(),
         "trend": d.gp.trend,
         "config_hash": config_hash,
     }
@@ -110,8 +116,11 @@ def _attributes(d: Discrepancy) -> dict[str, tuple[str, str]]:
         "std_mean": (unit, "point-wise mean of the simulations, " + stacked),
         "std_sd": (unit, "point-wise standard deviation of the simulations, " + stacked),
         "unit_draws": (DIMENSIONLESS, "theta* of the discrepancy phase, normalised to [0, 1]"),
-        "lam": (DIMENSIONLESS, "precision lambda of the simulations outside the basis"),
-        "lam_star": (DIMENSIONLESS, "precision lambda* of the measurement error"),
+        "aux_draws": (
+            DIMENSIONLESS,
+            "lambda, lambda* per output, AR(1) coefficients and discrepancy variances "
+            "(aux_names), fixed at their calibration means",
+        ),
         "log_density": ("", "log posterior density (up to a constant) at the draw"),
         "acceptance": (DIMENSIONLESS, "acceptance rate per chain and sampled coordinate"),
         **{f"gp_{name}": ("", f"GP of Delta: {name}") for name in _GP_DIMS},
@@ -152,17 +161,31 @@ def load_discrepancy(path: str | os.PathLike[str]) -> Discrepancy:
     check_format(ds, DISCREPANCY_FORMAT, path)
     v = {name: np.asarray(ds[name].values) for name in ds.data_vars}
     priors = {n: prior_from_spec(**spec) for n, spec in json.loads(ds.attrs["priors"]).items()}
-    post = Posterior.build(
-        names=json.loads(ds.attrs["names"]),
-        priors=priors,
-        unit_draws=v["unit_draws"],
-        lam=v["lam"],
-        lam_star=v["lam_star"],
-        log_density=v["log_density"],
-        acceptance=v["acceptance"],
-        seed=int(ds.attrs["seed"]),
-        algebra=str(ds.attrs["algebra"]),
-    )
+    names = json.loads(ds.attrs["names"])
+    common = {
+        "names": names,
+        "priors": priors,
+        "unit_draws": v["unit_draws"],
+        "log_density": v["log_density"],
+        "acceptance": v["acceptance"],
+        "seed": int(ds.attrs["seed"]),
+        "algebra": str(ds.attrs["algebra"]),
+    }
+    if "aux_draws" in v:
+        noise = tuple(output_noise_from_json(o) for o in json.loads(ds.attrs.get("noise", "[]")))
+        aux_names = json.loads(ds.attrs["aux_names"])
+        post = Posterior.build(**common, aux=v["aux_draws"], aux_names=aux_names, noise=noise)
+        spec = json.loads(ds.attrs["fixed"])
+        fixed = FixedPrecisions(
+            lam=float(spec["lam"]),
+            lam_star=tuple(float(x) for x in spec["lam_star"]),
+            phi=tuple(float(x) for x in spec["phi"]),
+            delta_rel=tuple(float(x) for x in spec["delta_rel"]),
+        )
+    else:  # written before the fixed precisions were recorded per output (one white output)
+        post = Posterior.build(**common, lam=v["lam"], lam_star=v["lam_star"])
+        fixed = FixedPrecisions(float(ds.attrs["lam_fixed"]), (float(ds.attrs["lam_star_fixed"]),))
+    converged = {"true": True, "false": False}.get(str(ds.attrs.get("converged", "unknown")))
     gp = DeltaGP(
         trend=str(ds.attrs["trend"]), x=v["x"], **{name: v[f"gp_{name}"] for name in _GP_DIMS}
     )
@@ -172,8 +195,9 @@ def load_discrepancy(path: str | os.PathLike[str]) -> Discrepancy:
         delta=v["delta"],
         gp=gp,
         posterior=post,
-        lam=float(ds.attrs["lam_fixed"]),
-        lam_star=float(ds.attrs["lam_star_fixed"]),
+        fixed=fixed,
         realisations=int(ds.attrs["realisations"]),
         update_interval=int(ds.attrs["update_interval"]),
+        updates=int(ds.attrs.get("updates", 0)),
+        converged=converged,
     )

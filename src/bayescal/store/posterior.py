@@ -54,6 +54,7 @@ __all__ = [
     "POSTERIOR_FORMAT",
     "SUMMARY_FILE",
     "load_posterior",
+    "output_noise_from_json",
     "posterior_dataset",
     "posterior_summary",
     "save_posterior",
@@ -207,7 +208,7 @@ def load_posterior(path: str | os.PathLike[str]) -> Posterior:
     stats = read_dataset(path, group="sample_stats")
     priors = {n: prior_from_spec(**spec) for n, spec in json.loads(extra.attrs["priors"]).items()}
     aux_names = json.loads(extra.attrs.get("aux_names", json.dumps(LAMBDA_NAMES)))
-    noise = tuple(_output_noise(o) for o in json.loads(extra.attrs.get("noise", "[]")))
+    noise = tuple(output_noise_from_json(o) for o in json.loads(extra.attrs.get("noise", "[]")))
     specs = json.loads(extra.attrs.get("derived", "{}"))
     derived = {}
     if specs:
@@ -227,7 +228,7 @@ def load_posterior(path: str | os.PathLike[str]) -> Posterior:
     ).with_derived(derived)
 
 
-def _output_noise(spec: dict[str, Any]) -> OutputNoise:
+def output_noise_from_json(spec: dict[str, Any]) -> OutputNoise:
     """An :class:`OutputNoise` from its JSON form (tuples come back as lists)."""
     fields = dict(spec)
     for key in ("rows", "bases", "prior"):
