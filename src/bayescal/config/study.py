@@ -46,16 +46,17 @@ from bayescal.config.base import (
 from bayescal.config.data import DataSection
 from bayescal.config.discrepancy import DiscrepancySection
 from bayescal.config.messages import format_errors
+from bayescal.config.outputs import OutputsSection
 from bayescal.config.parameters import DerivedSpec, Parameter
 from bayescal.config.screening import ScreeningSection
 from bayescal.config.simulators import SimulatorSection
 from bayescal.config.targets import KIND_UNITS, SENSOR_PREFIX, normal_unit, parse_sensor_target
-from bayescal.errors import ConfigError, DataError
+from bayescal.errors import ConfigError
 from bayescal.expressions import Expression
-from bayescal.glossary import GLOSSARY, glossary_quantity
+from bayescal.glossary import GLOSSARY
 from bayescal.mcmc.nuts import NUTS_MIN_WARMUP
 from bayescal.optional import module_installed
-from bayescal.units import same_scale, spread_to_internal
+from bayescal.units import same_scale
 
 if TYPE_CHECKING:
     from bayescal.design import Prior
@@ -102,123 +103,6 @@ class StudySection(Section):
     @classmethod
     def _inside(cls, value: Path, info: ValidationInfo) -> Path:
         return resolve_path(value, info, "a folder name")
-
-
-Spread = float | str
-
-
-class OutputError(Section):
-    """``[outputs.errors.<name>]``: the measurement error model of one measured output
-    (calibrated or held out)."""
-
-    model: Literal["white", "ar1"] = field_doc(
-        "Errors independent from sample to sample ('white', the paper) or AR(1) within a "
-        "period ('ar1': residuals that drift, coefficient sampled). Choose by cross-validation "
-        "on the training periods (bayescal compare), not by the test window.",
-        "ar1",
-        default="white",
-    )
-    sd: Spread | list[Spread] | None = field_doc(
-        "The sensor's accuracy as one standard deviation, or a range [low, high] taken as "
-        "the central 95 % interval of the noise SD; a number in the output's unit or text "
-        "with a unit ('0.1 W/m2', '0.2 K'). It becomes the prior of the output's observation "
-        "precision (centred on it, or spanning the range). Without it, a weak prior lets the "
-        "data decide.",
-        "0.1 W/m2",
-        ["0.05 W/m2", "0.3 W/m2"],
-        default=None,
-    )
-
-    discrepancy: bool = field_doc(
-        "Add a model discrepancy to this output inside the calibration's likelihood: a "
-        "Gaussian process over the periods' conditions x with the emulator's correlation "
-        "and a sampled variance (log-uniform prior from 1e-4 to 1 of the emulator's). "
-        "Systematic misfit then widens the parameters' intervals instead of biasing "
-        "them with false confidence.",
-        True,
-        default=False,
-    )
-
-    @field_validator("sd")
-    @classmethod
-    def _sd_shape(cls, value: Any) -> Any:
-        if isinstance(value, list) and len(value) != 2:
-            raise ValueError(f"give one sd or a range [low, high], got {len(value)} values")
-        return value
-
-
-class OutputsSection(Section):
-    """``[outputs]``: the measured outputs to calibrate on."""
-
-    calibrate: list[str] = field_doc(
-        "Glossary names of measured outputs, mapped in [data.columns] and produced by the "
-        "simulator.",
-        ["heat_flux_in"],
-        min_length=1,
-    )
-    errors: dict[str, OutputError] = field_doc(
-        "Measurement error model per calibrated output (default: white errors, weak prior); "
-        "for a held-out output its sd (required) is the sensor noise of its band.",
-        {"heat_flux_in": {"model": "ar1", "sd": "0.1 W/m2"}},
-        default_factory=dict,
-    )
-    held_out: list[str] = field_doc(
-        "Measured outputs predicted but never calibrated on: held-out sensors that test the "
-        "calibrated model where it was not fitted (a temperature inside the wall when the "
-        "flux is calibrated). Each needs [outputs.errors.<name>] sd, the sensor's accuracy; "
-        "its band is the simulator re-run at posterior draws plus that noise (needs "
-        "[predict] method = 'simulator'). Its metrics are reported on both windows, both "
-        "unseen by the calibration.",
-        ["temp_interface_2"],
-        default_factory=list,
-    )
-
-    def calibration_dump(self) -> dict[str, Any]:
-        """The section without the held-out outputs (what the emulator and calibration read)."""
-        return {
-            "calibrate": list(self.calibrate),
-            "errors": {
-                name: spec.model_dump(mode="json")
-                for name, spec in self.errors.items()
-                if name not in self.held_out
-            },
-        }
-
-    def noise_sd(self, name: str) -> float | tuple[float, float] | None:
-        """The stated accuracy of output ``name`` in its internal unit (``None`` if not given).
-
-        Raises
-        ------
-        bayescal.errors.ConfigError
-            For text that is not "<number> <unit>" with a unit of the output's dimension.
-        """
-        spec = self.errors.get(name)
-        if spec is None or spec.sd is None:
-            return None
-        values = spec.sd if isinstance(spec.sd, list) else [spec.sd]
-        out = [_spread(v, name) for v in values]
-        return out[0] if len(out) == 1 else (out[0], out[1])
-
-
-def _spread(value: Spread, name: str) -> float:
-    """One noise SD in the internal unit of output ``name``."""
-    if not isinstance(value, str):
-        return float(value)
-    parts = value.split(maxsplit=1)
-    quantity = glossary_quantity(name)
-    try:
-        number = float(parts[0])
-        if len(parts) == 1:
-            return number
-        if quantity is None:
-            raise DataError(f"{name!r} is not a glossary name, its unit is unknown")
-        return spread_to_internal(number, parts[1].strip(), quantity.dimension)
-    except (ValueError, DataError) as exc:
-        detail = exc.one_line() if isinstance(exc, DataError) else "not a number"
-        raise ConfigError(
-            f"outputs.errors.{name}.sd: {value!r} is not '<number> <unit>' ({detail})",
-            hint="write e.g. sd = '0.1 W/m2' or a plain number in the output's unit",
-        ) from None
 
 
 def _length(value: object) -> object:

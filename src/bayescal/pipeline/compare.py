@@ -44,7 +44,7 @@ from bayescal.calibration.cv import (
     refit_period,
 )
 from bayescal.config import Study, load_study
-from bayescal.config.study import OutputError
+from bayescal.config.outputs import OutputError
 from bayescal.errors import BayescalError, ConfigError
 from bayescal.mcmc.diagnostics import Diagnostics
 from bayescal.pipeline.keys import digest, stage_keys

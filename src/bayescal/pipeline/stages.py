@@ -28,7 +28,7 @@ import xarray as xr
 
 from bayescal.calibration.posterior import Derived, Posterior, calibrate
 from bayescal.config import Study, build_simulator, nominal_parameters
-from bayescal.config.study import OutputError
+from bayescal.config.outputs import OutputError
 from bayescal.data.measured import MeasuredData, load_measured
 from bayescal.design import Design, Prior, latin_hypercube
 from bayescal.emulator.assemble import Assembled, NoiseSpec, assemble
