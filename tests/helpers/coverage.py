@@ -38,6 +38,7 @@ class CaseResult:
     band95: dict[str, float]  # window -> share of measured samples inside the 95 % band
     band50: dict[str, float]
     posterior: Posterior
+    samples: dict[str, int]  # window -> number of measured samples scored
 
 
 def windows(a: Assembled) -> dict[str, np.ndarray]:
@@ -139,8 +140,9 @@ def run_case(
         n: bool(lo <= truth[n] <= hi) for n, lo, hi in zip(post.names, lower, upper, strict=True)
     }
     band95, band50 = _band_coverage(a, post, ve.measured["heat_flux_in"], ve.boundary)
+    samples = {w: int(m.sum()) for w, m in windows(a).items()}
     return CaseResult(
-        truth, covered, _derived_covered(post, truth, true_wall), band95, band50, post
+        truth, covered, _derived_covered(post, truth, true_wall), band95, band50, post, samples
     )
 
 
