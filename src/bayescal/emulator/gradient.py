@@ -45,7 +45,7 @@ from bayescal.emulator.kernel import LOG_2PI, FloatArray
 from bayescal.emulator.kron import Lru, SymEig
 from bayescal.errors import DataError
 
-__all__ = ["BasisTerm", "LogScalePosterior", "squared_distances"]
+__all__ = ["BasisTerm", "Eq9Data", "LogScalePosterior", "squared_distances"]
 
 
 def squared_distances(a: FloatArray) -> FloatArray:
@@ -89,11 +89,13 @@ class BasisTerm:
     grad_lam: float
 
 
-class LogScalePosterior:
-    """Eq. 9 on the log scale ``u = ln [beta, tau, lambda]`` with its gradient; picklable.
+class Eq9Data:
+    """The arrays of eq. 9 that every form of the hyperparameters' posterior shares.
 
-    ``value(u)`` equals ``TrainingPosterior(exp(u)) + sum(u)`` (the density the
-    MAP search of :func:`bayescal.emulator.training.train` maximises).
+    The design and conditions (normalised), the simulator weights laid out per
+    basis on the runs x periods grid, ``k_j^T k_j``, the priors and the squared
+    distances of the design and of the conditions. Subclasses keep their own
+    caches (:meth:`_reset_caches`), dropped when pickled.
 
     Parameters
     ----------
@@ -110,6 +112,9 @@ class LogScalePosterior:
     priors
         Priors of ``tau`` and ``rho``.
     """
+
+    #: Names of the cache attributes (dropped when pickled).
+    CACHES: tuple[str, ...] = ()
 
     def __init__(
         self,
@@ -137,23 +142,51 @@ class LogScalePosterior:
         self.priors = HyperPriors() if priors is None else priors
         self.d_theta = squared_distances(self.theta)
         self.d_x = squared_distances(self.x)
-        self._reset()
+        self._reset_caches()
 
-    def _reset(self) -> None:
-        self._eig_t = [Lru(3) for _ in range(self.p)]
-        self._eig_x = [Lru(3) for _ in range(self.p)]
-        self._rot = [Lru(2) for _ in range(self.p)]
-        self.evaluations = 0
+    def _reset_caches(self) -> None:
+        """Create empty caches (none here)."""
 
     def __getstate__(self) -> dict[str, Any]:
         state = self.__dict__.copy()
-        for key in ("_eig_t", "_eig_x", "_rot"):
-            state.pop(key)
+        for key in self.CACHES:
+            state.pop(key, None)
         return state
 
     def __setstate__(self, state: dict[str, Any]) -> None:
         self.__dict__.update(state)
-        self._reset()
+        self._reset_caches()
+
+
+class LogScalePosterior(Eq9Data):
+    """Eq. 9 on the log scale ``u = ln [beta, tau, lambda]`` with its gradient; picklable.
+
+    ``value(u)`` equals ``TrainingPosterior(exp(u)) + sum(u)`` (the density the
+    MAP search of :func:`bayescal.emulator.training.train` maximises).
+
+    Parameters
+    ----------
+    theta
+        Normalised design, ``(R, t)``. [-]
+    x
+        Normalised variable conditions, ``(m*, s)``. [-]
+    w
+        Simulator weights, ``(R m*, p)``, run-major rows. [-]
+    ktk
+        ``k_j^T k_j``, ``(p,)``. [-]
+    lam_prior
+        ``(shape, rate)`` of the Gamma prior of ``lambda`` (eq. 7).
+    priors
+        Priors of ``tau`` and ``rho``.
+    """
+
+    CACHES = ("_eig_t", "_eig_x", "_rot")
+
+    def _reset_caches(self) -> None:
+        self._eig_t = [Lru(3) for _ in range(self.p)]
+        self._eig_x = [Lru(3) for _ in range(self.p)]
+        self._rot = [Lru(2) for _ in range(self.p)]
+        self.evaluations = 0
 
     def subset(self, runs: ArrayLike) -> LogScalePosterior:
         """The same posterior on the design rows ``runs`` only (all periods)."""

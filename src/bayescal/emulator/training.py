@@ -59,7 +59,7 @@ import os
 from collections.abc import Callable
 from dataclasses import dataclass
 from functools import partial
-from typing import Any, Literal, get_args
+from typing import Literal, get_args
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -68,7 +68,7 @@ from scipy import optimize
 from bayescal.design import log_gamma
 from bayescal.emulator.assemble import Assembled
 from bayescal.emulator.gp import Emulator
-from bayescal.emulator.gradient import LogScalePosterior, squared_distances
+from bayescal.emulator.gradient import Eq9Data, LogScalePosterior
 from bayescal.emulator.hyper import HyperLayout, HyperPriors, log_prior_beta
 from bayescal.emulator.kernel import LOG_2PI, FloatArray
 from bayescal.emulator.kron import Lru, SymEig
@@ -80,7 +80,7 @@ from bayescal.emulator.mapfit import (
     laplace_draws,
     laplace_hessian,
 )
-from bayescal.errors import ConfigError, DataError
+from bayescal.errors import ConfigError
 from bayescal.mcmc.chains import ChainBackend, Chains, run_chains
 from bayescal.mcmc.samplers.mwg import MetropolisWithinGibbs
 
@@ -90,7 +90,7 @@ TrainingMethod = Literal["map", "mcmc"]
 TRAINING_METHODS: tuple[str, ...] = get_args(TrainingMethod)
 
 
-class TrainingPosterior:
+class TrainingPosterior(Eq9Data):
     """Log posterior of eq. 9 over ``(beta, tau, lambda)``, up to a constant; picklable.
 
     Parameters
@@ -109,33 +109,7 @@ class TrainingPosterior:
         Priors of ``tau`` and ``rho``.
     """
 
-    def __init__(
-        self,
-        theta: ArrayLike,
-        x: ArrayLike,
-        w: ArrayLike,
-        ktk: ArrayLike,
-        lam_prior: tuple[float, float],
-        priors: HyperPriors | None = None,
-    ) -> None:
-        self.theta = np.asarray(theta, dtype=float)
-        self.x = np.asarray(x, dtype=float)
-        w_arr = np.asarray(w, dtype=float)
-        n_runs, n_per = self.theta.shape[0], self.x.shape[0]
-        if w_arr.ndim != 2 or w_arr.shape[0] != n_runs * n_per:
-            raise DataError(
-                f"weights have shape {w_arr.shape}, expected ({n_runs} runs x {n_per} periods, p)"
-            )
-        self.p = w_arr.shape[1]
-        self.t = self.theta.shape[1]
-        self.layout = HyperLayout(self.p, self.t + self.x.shape[1])
-        self.w_grid = w_arr.T.reshape(self.p, n_runs, n_per)
-        self.ktk = np.asarray(ktk, dtype=float).reshape(self.p)
-        self.lam_prior = (float(lam_prior[0]), float(lam_prior[1]))
-        self.priors = HyperPriors() if priors is None else priors
-        self.d_theta = squared_distances(self.theta)
-        self.d_x = squared_distances(self.x)
-        self._reset_caches()
+    CACHES = ("_eig_t", "_eig_x", "_half", "_rot", "_terms")
 
     def _reset_caches(self) -> None:
         self._eig_t = [Lru() for _ in range(self.p)]
@@ -143,16 +117,6 @@ class TrainingPosterior:
         self._half = [Lru() for _ in range(self.p)]  # Q_t^T W, keyed on beta_theta
         self._rot = [Lru() for _ in range(self.p)]
         self._terms = [Lru() for _ in range(self.p)]
-
-    def __getstate__(self) -> dict[str, Any]:
-        state = self.__dict__.copy()
-        for key in ("_eig_t", "_eig_x", "_half", "_rot", "_terms"):
-            state.pop(key)
-        return state
-
-    def __setstate__(self, state: dict[str, Any]) -> None:
-        self.__dict__.update(state)
-        self._reset_caches()
 
     def _eig(self, dist: FloatArray, beta: FloatArray) -> SymEig:
         corr = np.exp(-np.tensordot(beta, dist, axes=1))
