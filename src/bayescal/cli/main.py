@@ -56,6 +56,28 @@ def main(ctx: click.Context, debug: bool) -> None:
 STUDY = click.argument("study", type=click.Path(path_type=Path))
 
 
+def simulation_options(command: F) -> F:
+    """The options that say where simulations run: ``--jobs``, ``--backend``, ``--scheduler``."""
+    for option in reversed(
+        (
+            click.option(
+                "--jobs", "-j", type=click.IntRange(min=1), default=None, help="Simulation workers."
+            ),
+            click.option(
+                "--backend",
+                type=click.Choice(["serial", "processes", "dask"]),
+                default=None,
+                help="Simulation backend [default: the study's runner.backend].",
+            ),
+            click.option(
+                "--scheduler", default=None, help="Dask scheduler address (implies --backend dask)."
+            ),
+        )
+    ):
+        command = option(command)
+    return command
+
+
 @main.command()
 @STUDY
 @user_errors
@@ -187,14 +209,7 @@ def init(example: str | None, directory: Path | None, force: bool) -> None:
     show_default=True,
     help="Stop after this stage.",
 )
-@click.option("--jobs", "-j", type=click.IntRange(min=1), default=None, help="Simulation workers.")
-@click.option(
-    "--backend",
-    type=click.Choice(["serial", "processes", "dask"]),
-    default=None,
-    help="Simulation backend [default: the study's runner.backend].",
-)
-@click.option("--scheduler", default=None, help="Dask scheduler address (implies --backend dask).")
+@simulation_options
 @click.option("--quiet", "-q", is_flag=True, help="No progress bars or notes; errors only.")
 @click.option(
     "--strict",
@@ -257,14 +272,7 @@ def run(
     help="Set screen = false on the proposed parameters and screen = true on the others in "
     "the study file (the old file is kept as study.toml.bak).",
 )
-@click.option("--jobs", "-j", type=click.IntRange(min=1), default=None, help="Simulation workers.")
-@click.option(
-    "--backend",
-    type=click.Choice(["serial", "processes", "dask"]),
-    default=None,
-    help="Simulation backend [default: the study's runner.backend].",
-)
-@click.option("--scheduler", default=None, help="Dask scheduler address (implies --backend dask).")
+@simulation_options
 @click.option("--quiet", "-q", is_flag=True, help="No progress bar or notes; errors only.")
 @user_errors
 def screen(
@@ -354,14 +362,7 @@ def report(study: Path) -> None:
     show_default=True,
     help="Posterior draws per chain used for the scores (thinned evenly).",
 )
-@click.option("--jobs", "-j", type=click.IntRange(min=1), default=None, help="Simulation workers.")
-@click.option(
-    "--backend",
-    type=click.Choice(["serial", "processes", "dask"]),
-    default=None,
-    help="Simulation backend [default: the study's runner.backend].",
-)
-@click.option("--scheduler", default=None, help="Dask scheduler address (implies --backend dask).")
+@simulation_options
 @click.option("--quiet", "-q", is_flag=True, help="No progress bars or notes; the table only.")
 @user_errors
 def compare(
