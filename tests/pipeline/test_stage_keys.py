@@ -25,13 +25,13 @@ from bayescal.pipeline.keys import derived_seed, digest
 from bayescal.pipeline.stages import prepare
 
 WALL_KEYS = {
-    "design": "f6f8f90cb6d42091ec14444ed9519babadc3b00636b47031c80800ebd3bd120a",
-    "simulate": "5aec5b7637357200c8d3fc1fccce44ff078c2374c66f6b423e65a0c82c1c0537",
-    "emulator": "aec6a64105d714baa8fd34c4c8414fa45d3afefd18331a5e502c54d06014f92c",
-    "calibrate": "88c417f8e39707fcc8b262757a315797d0ee1a4d0669b9692c951802c1c8310f",
-    "discrepancy": "d23d03d48f3a0e1baffaefab043c28e1a4e40c7d39faeb15fe06cdb0d9044c5e",
-    "predict": "43d3475d0c38b4ebeaf63201e692fb7faab31ed8196cc8cbccb4cb95b5140b7e",
-    "report": "6b2bcd56a5b772daefa881e37881d00a0dbb3372dc8882de05f2215b354258a1",
+    "design": "4f30b4a1eb437cae26ee0031fd9431c9e0c4a8a50e25dbb93719d364e12c98d0",
+    "simulate": "3ac9b12d13480b4a96017530c534370bb276b4f31b42d7209258b214aa91cc04",
+    "emulator": "64db760bda8e3e331f4b3b8a876ef5aebb80316a6adc975b8cedd60066bda342",
+    "calibrate": "fa0b4481aebc35d7b5b9c062436a00b06420bb92f428cb1ca537b2f3a55a11d1",
+    "discrepancy": "c74a5337fa82f3296b8ab70225785109199f8d84b8da3193018d021672ba809d",
+    "predict": "41fbfe0d588bfda8c1ddbc8f3ce2161f20e4cdeb791f90f6c1ca264c7ecf9484",
+    "report": "507f30e191dafe7d0d430e24047e578dfbb06b40df9838d9d510792fc37cfefc",
 }
 
 
