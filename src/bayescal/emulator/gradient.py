@@ -164,20 +164,8 @@ class LogScalePosterior(Eq9Data):
     ``value(u)`` equals ``TrainingPosterior(exp(u)) + sum(u)`` (the density the
     MAP search of :func:`bayescal.emulator.training.train` maximises).
 
-    Parameters
-    ----------
-    theta
-        Normalised design, ``(R, t)``. [-]
-    x
-        Normalised variable conditions, ``(m*, s)``. [-]
-    w
-        Simulator weights, ``(R m*, p)``, run-major rows. [-]
-    ktk
-        ``k_j^T k_j``, ``(p,)``. [-]
-    lam_prior
-        ``(shape, rate)`` of the Gamma prior of ``lambda`` (eq. 7).
-    priors
-        Priors of ``tau`` and ``rho``.
+    Built from the arrays of :class:`~bayescal.emulator.gradient.Eq9Data` (same
+    parameters).
     """
 
     CACHES = ("_eig_t", "_eig_x", "_rot")

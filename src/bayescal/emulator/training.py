@@ -93,20 +93,8 @@ TRAINING_METHODS: tuple[str, ...] = get_args(TrainingMethod)
 class TrainingPosterior(Eq9Data):
     """Log posterior of eq. 9 over ``(beta, tau, lambda)``, up to a constant; picklable.
 
-    Parameters
-    ----------
-    theta
-        Normalised design, ``(R, t)``. [-]
-    x
-        Normalised variable conditions, ``(m*, s)``. [-]
-    w
-        Simulator weights, ``(R m*, p)``, run-major rows. [-]
-    ktk
-        ``k_j^T k_j``, ``(p,)``. [-]
-    lam_prior
-        ``(shape, rate)`` of the Gamma prior of ``lambda`` (eq. 7).
-    priors
-        Priors of ``tau`` and ``rho``.
+    Built from the arrays of :class:`~bayescal.emulator.gradient.Eq9Data` (same
+    parameters).
     """
 
     CACHES = ("_eig_t", "_eig_x", "_half", "_rot", "_terms")
