@@ -26,6 +26,7 @@ from dataclasses import dataclass, field
 from typing import Any, ClassVar, Literal
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 from scipy import special
 from scipy.stats import qmc
 
@@ -38,9 +39,12 @@ __all__ = [
     "UniformPrior",
     "latin_hypercube",
     "log_gamma",
+    "log_gamma_array",
+    "log_gamma_of_log",
     "prior_from_spec",
 ]
 
+FloatArray = NDArray[np.float64]
 Optimization = Literal["random-cd", "lloyd"]
 OPTIMIZATIONS: tuple[str, ...] = ("random-cd", "lloyd")
 
@@ -59,11 +63,41 @@ def log_gamma(value: float, shape: float, rate: float) -> float:
     """Log Gamma(shape, rate) density of a precision, up to its constant; ``-inf`` if <= 0.
 
     The priors of the precisions ``lambda``, ``lambda*`` and ``tau`` of the
-    paper's eqs. 7 and 9: ``(shape - 1) log value - rate value``.
+    paper's eqs. 7 and 9: ``(shape - 1) log value - rate value``. The numpy
+    Gamma log-density lives here only, in three forms: this one (one value),
+    :func:`log_gamma_array` (elementwise) and :func:`log_gamma_of_log` (given
+    the log of the value, for samplers on the log scale).
     """
     if not value > 0.0:
         return -math.inf
     return (shape - 1.0) * math.log(value) - rate * value
+
+
+def log_gamma_array(value: ArrayLike, shape: ArrayLike, rate: ArrayLike) -> FloatArray:
+    """:func:`log_gamma` elementwise: ``(shape - 1) log x - rate x``, ``-inf`` where ``x <= 0``.
+
+    ``shape`` and ``rate`` broadcast against ``value`` (one pair per column of a
+    ``(B, q)`` array, say). Equal, value for value, to :func:`log_gamma`.
+    """
+    x = np.asarray(value, dtype=float)
+    shape_m1 = np.asarray(shape, dtype=float) - 1.0
+    rate_arr = np.asarray(rate, dtype=float)
+    if x.size and x.min() > 0.0:  # the common case, without the masking
+        out: FloatArray = shape_m1 * np.log(x) - rate_arr * x
+        return out
+    positive = x > 0.0
+    safe = np.where(positive, x, 1.0)
+    masked: FloatArray = np.where(positive, shape_m1 * np.log(safe) - rate_arr * safe, -math.inf)
+    return masked
+
+
+def log_gamma_of_log(log_value: float, shape: float, rate: float) -> float:
+    """:func:`log_gamma` at ``exp(log_value)``, given ``log_value`` (no logarithm taken).
+
+    ``(shape - 1) log_value - rate exp(log_value)``; the Jacobian of the log
+    scale (``+ log_value``) is the caller's.
+    """
+    return (shape - 1.0) * log_value - rate * math.exp(log_value)
 
 
 @dataclass(frozen=True)

@@ -121,6 +121,29 @@ def test_missing_periods_and_per_period_nuggets_match_dense(
         )
 
 
+@settings(max_examples=60, deadline=None)
+@given(problems(), st.data())
+def test_an_unsorted_obs_index_matches_dense_and_the_sorted_one(
+    prob: Problem, data: st.DataObject
+) -> None:
+    """Observed periods listed in any order (``w*`` rows with them): the same data, so
+    the same density as the sorted listing, on the full grid and with missing periods."""
+    n_per = prob.x.shape[0]
+    subset = data.draw(st.sets(st.integers(0, n_per - 1), min_size=1, max_size=n_per))
+    obs = np.array(data.draw(st.permutations(sorted(subset))))
+    ordered = np.sort(obs)
+    ref = DenseCalibrationDensity(*prob.args(obs)).pieces(prob.theta_star, prob.lam, prob.lam_star)
+    methods = ("schur", "eigen") if obs.size == n_per else ("schur",)  # eigen: full grid
+    for method in methods:
+        fast = KronCalibrationDensity(*prob.args(obs), method=method)
+        _assert_agree(fast.pieces(prob.theta_star, prob.lam, prob.lam_star), ref)
+    sorted_ref = KronCalibrationDensity(*prob.args(ordered))
+    _assert_agree(
+        KronCalibrationDensity(*prob.args(obs)).pieces(prob.theta_star, prob.lam, prob.lam_star),
+        sorted_ref.pieces(prob.theta_star, prob.lam, prob.lam_star),
+    )
+
+
 @settings(max_examples=40, deadline=None)
 @given(problems(), st.integers(0, 2**32 - 1))
 def test_per_basis_and_period_nuggets_match_dense(prob: Problem, seed: int) -> None:

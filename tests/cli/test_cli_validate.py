@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import shutil
 import subprocess
 import sys
@@ -108,15 +109,45 @@ def test_console_script_subprocess(tmp_path: Path) -> None:
     assert bad.stderr.count("\n") == 1
 
 
+def _module_env() -> dict[str, str]:
+    """The environment for ``python -m bayescal``: this checkout's ``src`` first on the path
+    (the interpreter's own installation may be another checkout)."""
+    paths = [str(REPO / "src"), *filter(None, [os.environ.get("PYTHONPATH")])]
+    return {**os.environ, "PYTHONPATH": os.pathsep.join(paths)}
+
+
+def test_python_m_bayescal_help_lists_the_commands() -> None:
+    helped = subprocess.run(
+        [sys.executable, "-m", "bayescal", "--help"],
+        capture_output=True,
+        text=True,
+        env=_module_env(),
+        cwd=REPO.parent,  # not the checkout: the package comes from PYTHONPATH
+        timeout=300,
+    )
+    assert helped.returncode == 0, helped.stderr
+    assert helped.stderr == ""
+    assert helped.stdout.startswith("Usage: bayescal [OPTIONS] COMMAND")
+    commands = helped.stdout.split("Commands:", 1)[1]
+    listed = {line.split()[0] for line in commands.splitlines() if line.strip()}
+    assert {"validate", "run", "screen", "simulate", "compare", "report", "show"} <= listed
+
+
 def test_python_m_bayescal_runs_the_command_line(tmp_path: Path) -> None:
     # `python -m bayescal` is the console script without it (bayescal/__main__.py).
     version = subprocess.run(
-        [sys.executable, "-m", "bayescal", "--version"], capture_output=True, text=True
+        [sys.executable, "-m", "bayescal", "--version"],
+        capture_output=True,
+        text=True,
+        env=_module_env(),
     )
     assert version.returncode == 0, version.stderr
     assert version.stdout.strip() == f"bayescal, version {__version__}"
     ok = subprocess.run(
-        [sys.executable, "-m", "bayescal", "validate", str(FIXTURE)], capture_output=True, text=True
+        [sys.executable, "-m", "bayescal", "validate", str(FIXTURE)],
+        capture_output=True,
+        text=True,
+        env=_module_env(),
     )
     assert ok.returncode == 0, ok.stderr
     assert "4 training periods" in ok.stdout
@@ -124,11 +155,12 @@ def test_python_m_bayescal_runs_the_command_line(tmp_path: Path) -> None:
         [sys.executable, "-m", "bayescal", "validate", str(tmp_path)],
         capture_output=True,
         text=True,
+        env=_module_env(),
     )
     assert bad.returncode == 2
     assert bad.stderr.startswith("error: ")
     helped = subprocess.run(
-        [sys.executable, "-m", "bayescal", "-h"], capture_output=True, text=True
+        [sys.executable, "-m", "bayescal", "-h"], capture_output=True, text=True, env=_module_env()
     )
     assert helped.stdout.startswith("Usage: bayescal [OPTIONS] COMMAND")
 

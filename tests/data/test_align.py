@@ -245,13 +245,41 @@ def test_linear_resampling_puts_a_jittering_clock_on_the_grid() -> None:
     np.testing.assert_allclose(got[~missing], 3.0 * clock[~missing] / 3600 + 1.0, atol=1e-9)
 
 
+def test_a_few_rows_off_the_clock_are_named_and_the_clock_is_not_moved() -> None:
+    """A stray 05:45 in half-hourly data: name its line, offer to remove or correct it
+    (or to interpolate), not to start the clock on it (every other row would be off)."""
+    times = _utc("2020-01-01 00:00", 48, "30min")
+    stray = times.to_numpy().copy()
+    stray[11] += np.timedelta64(15, "m")  # 05:30 -> 05:45
+    shifted = pd.DatetimeIndex(stray)
+    texts = np.array([f"{t:%Y-%m-%d %H:%M}" for t in shifted.tz_convert(UTC)])
+    labels = RowLabels(np.arange(2, 50), texts)
+    with pytest.raises(DataError) as info:
+        align(_frame(shifted, x=np.zeros(48)), STEP, zone=UTC, labels=labels)
+    message = str(info.value)
+    assert "the timestamp on line 13 ('2020-01-01 05:45') is not on the study clock" in message
+    assert "remove or correct that row in the file" in message
+    assert "data.resample = 'linear'" in message
+    assert "data.start" not in message
+    stray[30] += np.timedelta64(10, "m")  # a second one: both named, still not a shift
+    with pytest.raises(DataError) as info:
+        align(_frame(pd.DatetimeIndex(stray), x=np.zeros(48)), STEP, zone=UTC)
+    message = str(info.value)
+    assert "the timestamps 2020-01-01 05:45 (UTC), 2020-01-01 15:10 (UTC) are not" in message
+    assert "remove or correct those 2 rows" in message
+    assert "data.start" not in message
+    # the other remedy offered works: the samples interpolated onto the clock
+    out = align(_frame(shifted, x=np.arange(48.0)), STEP, zone=UTC, resample="linear")
+    assert len(out) == 48
+
+
 def test_a_shifted_record_is_not_jitter_and_errors_show_local_times() -> None:
     times = _utc("2020-01-01 00:15", 10, "30min")
     labels = RowLabels(np.arange(2, 12), np.array([f"{t:%H:%M}" for t in times.tz_convert(UTC1)]))
     with pytest.raises(DataError) as info:
         align(_frame(times, x=np.zeros(10)), STEP, zone=UTC1, labels=labels)
     message = str(info.value)
-    assert "timestamps line 3 ('01:45'), line 4 ('02:15')" in message
+    assert "the timestamps on line 3 ('01:45'), line 4 ('02:15')" in message
     assert "not on the study clock (instants 2020-01-01 01:30 (UTC+01:00) + k × 30min)" in message
     assert "data.start = '2020-01-01T01:45:00'" in message  # a local time, as data.start takes
     with pytest.raises(DataError, match=r"data\.start 2020-01-01 00:00 \(UTC\+01:00\) is before"):

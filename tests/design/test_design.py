@@ -16,6 +16,9 @@ from bayescal.design import (
     Design,
     UniformPrior,
     latin_hypercube,
+    log_gamma,
+    log_gamma_array,
+    log_gamma_of_log,
     prior_from_spec,
 )
 from bayescal.errors import ConfigError
@@ -34,6 +37,28 @@ def test_uniform_logpdf() -> None:
     expected = np.array([-np.inf, -math.log(4), -math.log(4), -math.log(4), -np.inf])
     np.testing.assert_allclose(prior.logpdf(x), expected, rtol=1e-15)
     np.testing.assert_array_equal(prior.logpdf_unit([-0.1, 0.0, 0.5, 1.0]), [-np.inf, 0, 0, 0])
+
+
+@pytest.mark.parametrize(("shape", "rate"), [(5.0, 5.0), (0.5, 2.0), (1.0, 0.1)])
+def test_the_three_forms_of_the_gamma_log_density_agree(shape: float, rate: float) -> None:
+    """``log_gamma`` (one value), ``log_gamma_array`` and ``log_gamma_of_log``: one density,
+    scipy's up to its constant, ``-inf`` where the value is not positive."""
+    x = np.array([0.01, 0.5, 1.0, 3.7, 40.0])
+    ref = stats.gamma(shape, scale=1.0 / rate).logpdf(x)
+    const = shape * math.log(rate) - math.lgamma(shape)
+    np.testing.assert_allclose([log_gamma(v, shape, rate) for v in x], ref - const, rtol=1e-12)
+    # equal value for value, on the masked path (a value <= 0 present) and the plain one
+    mixed = np.array([-1.0, 0.0, *x])
+    expected = [log_gamma(float(v), shape, rate) for v in mixed]
+    np.testing.assert_array_equal(log_gamma_array(mixed, shape, rate), expected)
+    np.testing.assert_array_equal(log_gamma_array(x, shape, rate), expected[2:])
+    np.testing.assert_allclose(
+        [log_gamma_of_log(math.log(v), shape, rate) for v in x], expected[2:], rtol=1e-12
+    )
+    # one (shape, rate) pair per column
+    table = np.column_stack([x, 2.0 * x])
+    both = log_gamma_array(table, [shape, 2.0], [rate, 1.0])
+    np.testing.assert_array_equal(both[:, 1], [log_gamma(2.0 * v, 2.0, 1.0) for v in x])
 
 
 @pytest.mark.parametrize(("a", "b"), [(2.0, 5.0), (0.5, 0.5), (1.0, 3.0), (1.0, 1.0)])

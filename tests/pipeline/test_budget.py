@@ -92,3 +92,38 @@ def test_disk_is_checked_against_the_free_space_of_the_output_folder(
     monkeypatch.setenv(DISK_VARIABLE, "1GiB")
     needs = check_budget(study, measured)
     assert np.isfinite(sum(n.disk for n in needs))
+
+
+def test_the_screening_counts_where_the_study_screens(tmp_path: Path) -> None:
+    """``trajectories x (parameters + 1)`` runs, counted only for a study with candidates
+    or a [screening] section (``bayescal screen`` checks its own part in any case)."""
+    plain = load_study(_wall(tmp_path / "plain"))
+    measured = load_measured(plain)
+    assert "screening" not in {need.what for need in estimate(plain, measured)}
+    screened = "[screening]\ntrajectories = 12\n\n[calibration]"
+    sections = load_study(_wall(tmp_path / "section", ("[calibration]", screened)))
+    heat = 'targets = ["concrete.specific_heat"]'
+    candidate = (heat, f"{heat}\nscreen = true")
+    flagged = load_study(_wall(tmp_path / "flagged", candidate))
+    for study, trajectories in ((sections, 12), (flagged, 10)):
+        needs = {need.what: need for need in estimate(study, measured)}
+        need = needs["screening"]
+        assert need.key == "screening.trajectories"
+        runs = trajectories * (3 + 1)  # the wall's 3 parameters, candidates included
+        assert need.memory >= 2 * runs * measured.n * 8
+        assert need.disk >= runs * measured.n * 8
+
+
+def test_the_message_names_the_key_out_of_proportion(tmp_path: Path) -> None:
+    """chains x samples: the key further above its default is named."""
+    cases = {
+        ("chains = 4", "chains = 100000000"): "calibration.chains = 100000000",
+        ("samples = 2000", "samples = 1000000000000"): "calibration.samples = 1000000000000",
+    }
+    for k, (edit, named) in enumerate(cases.items()):
+        study = load_study(_wall(tmp_path / str(k), edit))
+        measured = load_measured(study)
+        with pytest.raises(ConfigError) as info:
+            check_budget(study, measured)
+        assert str(info.value).count(named) == 1
+        assert f"lower {named.split(' = ')[0]}," in str(info.value)

@@ -75,19 +75,22 @@ _HOLDER = """
 import sys, time
 from pathlib import Path
 from bayescal.store.folder import OutputLock
-lock = OutputLock(Path(sys.argv[1]), command="run")
+lock = OutputLock(Path(sys.argv[1]), command=sys.argv[2])
 lock.acquire()
 print("locked", flush=True)
 time.sleep(600)
 """
 
 
-def _hold(out: Path) -> subprocess.Popen[str]:
-    """Another process that holds the output folder's lock until killed."""
+def _hold(out: Path, command: str = "run") -> subprocess.Popen[str]:
+    """Another process that holds the output folder's lock (as ``command``) until killed."""
     out.mkdir(parents=True, exist_ok=True)
     env = {**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)}
     proc = subprocess.Popen(
-        [sys.executable, "-c", _HOLDER, str(out)], stdout=subprocess.PIPE, text=True, env=env
+        [sys.executable, "-c", _HOLDER, str(out), command],
+        stdout=subprocess.PIPE,
+        text=True,
+        env=env,
     )
     assert proc.stdout is not None
     assert proc.stdout.readline().strip() == "locked"
@@ -119,6 +122,52 @@ def test_a_second_run_says_who_holds_the_folder_and_a_stale_lock_is_taken_over(
     assert f"took over the stale lock of process {holder.pid}" in out_text
     assert (out / "design.csv").is_file()
     assert not (out / LOCK_FILE).exists()  # a run that ends lets go of its lock
+
+
+def _kill(proc: subprocess.Popen[str]) -> None:
+    proc.send_signal(signal.SIGKILL)  # killed: its lock file stays behind, unheld
+    proc.wait()
+    assert proc.stdout is not None
+    proc.stdout.close()
+
+
+def test_screen_and_run_exclude_each_other(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """``bayescal screen`` takes the lock ``run`` takes: a screen is refused while a run
+    holds the folder, a run while a screen does, each naming the other; nothing of the
+    refused command is written."""
+    from bayescal.pipeline import screen as screening
+
+    folder = _study(tmp_path)
+    out = folder / "out"
+    holder = _hold(out, "run")
+    try:
+        code, out_text, err = _cli("screen", str(folder))
+        assert code == 2
+        assert out_text == ""
+        line = _one_line(err)
+        assert f"{out} is in use by another bayescal run (process {holder.pid} started" in line
+        assert sorted(p.name for p in out.iterdir()) == [LOCK_FILE]  # no simulations/
+    finally:
+        _kill(holder)
+    refused: list[str] = []
+    real_run_design = screening.run_design
+
+    def run_meanwhile(*args: object, **kwargs: object) -> object:
+        """A ``run`` of the same study while the screen simulates."""
+        with pytest.raises(OutputError) as info:
+            run(load_study(folder), until="design", options=SERIAL)
+        refused.append(info.value.one_line())
+        return real_run_design(*args, **kwargs)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(screening, "run_design", run_meanwhile)
+    code, out_text, err = _cli("screen", str(folder))
+    assert code == 0, err
+    assert f"took over the stale lock of process {holder.pid}" in out_text  # the killed run's
+    assert len(refused) == 1  # the run was tried once, and refused naming this screen
+    assert f"{out} is in use by another bayescal screen (process {os.getpid()} " in refused[0]
+    assert not (out / "design.csv").exists()
+    assert (out / "screening" / "morris.csv").is_file()
+    assert not (out / LOCK_FILE).exists()  # the screen let go of it
 
 
 def test_the_lock_is_exclusive_within_one_process_too(tmp_path: Path) -> None:

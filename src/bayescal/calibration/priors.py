@@ -25,22 +25,14 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy import special
 
-from bayescal.design import BetaPrior, Prior, UniformPrior, log_gamma
+from bayescal.design import BetaPrior, Prior, UniformPrior, log_gamma, log_gamma_array
 from bayescal.emulator.noise import DELTA_RANGE, PHI_MAX
 from bayescal.errors import ConfigError
 
-__all__ = ["CalibrationPriors", "ThetaPriors", "log_gamma_array"]
+__all__ = ["CalibrationPriors", "ThetaPriors"]
 
 FloatArray = NDArray[np.float64]
 _INF = math.inf
-
-
-def log_gamma_array(value: FloatArray, shape_m1: float, rate: float) -> FloatArray:
-    """``(shape - 1) log x - rate x`` for ``x > 0``, ``-inf`` elsewhere (elementwise)."""
-    positive = value > 0.0
-    safe = np.where(positive, value, 1.0)
-    out: FloatArray = np.where(positive, shape_m1 * np.log(safe) - rate * safe, -_INF)
-    return out
 
 
 @dataclass(frozen=True)
@@ -107,7 +99,7 @@ class CalibrationPriors:
     theta_priors: ThetaPriors = field(init=False, repr=False, compare=False)
     uniform: tuple[int, ...] = field(init=False, repr=False, compare=False)
     is_uniform: tuple[bool, ...] = field(init=False, repr=False, compare=False)
-    shape_m1: FloatArray = field(init=False, repr=False, compare=False)
+    shape: FloatArray = field(init=False, repr=False, compare=False)
     rate: FloatArray = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
@@ -126,7 +118,7 @@ class CalibrationPriors:
         object.__setattr__(self, "is_uniform", is_uniform)
         object.__setattr__(self, "uniform", tuple(k for k, u in enumerate(is_uniform) if u))
         gammas = (lam, *stars)
-        object.__setattr__(self, "shape_m1", np.array([g[0] - 1.0 for g in gammas]))
+        object.__setattr__(self, "shape", np.array([g[0] for g in gammas]))
         object.__setattr__(self, "rate", np.array([g[1] for g in gammas]))
 
     @property
@@ -176,11 +168,7 @@ class CalibrationPriors:
         if k >= t + 1 + self.n_outputs:
             return np.where(np.abs(column) < PHI_MAX, 0.0, -_INF)
         if k >= t:
-            shape_m1, rate = float(self.shape_m1[k - t]), float(self.rate[k - t])
-            if column.min() > 0.0:
-                out: FloatArray = shape_m1 * np.log(column) - rate * column
-                return out
-            return log_gamma_array(column, shape_m1, rate)
+            return log_gamma_array(column, float(self.shape[k - t]), float(self.rate[k - t]))
         if self.is_uniform[k]:
             if column.min() >= 0.0 and column.max() <= 1.0:
                 return np.zeros(column.shape)
@@ -192,12 +180,12 @@ class CalibrationPriors:
         t = self.t
         n_prec = 1 + self.n_outputs
         prec = points[:, t : t + n_prec]
-        if prec.min() > 0.0:
-            total = (self.shape_m1 * np.log(prec) - self.rate * prec).sum(axis=1)
+        if prec.min() > 0.0:  # one call; the other branch sums the columns in order
+            total = log_gamma_array(prec, self.shape, self.rate).sum(axis=1)
         else:
-            total = log_gamma_array(prec[:, 0], float(self.shape_m1[0]), float(self.rate[0]))
+            total = log_gamma_array(prec[:, 0], float(self.shape[0]), float(self.rate[0]))
             for q in range(1, n_prec):
-                total += log_gamma_array(prec[:, q], float(self.shape_m1[q]), float(self.rate[q]))
+                total += log_gamma_array(prec[:, q], float(self.shape[q]), float(self.rate[q]))
         if self.n_phi:
             phi = points[:, t + n_prec : t + n_prec + self.n_phi]
             total = np.where((np.abs(phi) < PHI_MAX).all(axis=1), total, -_INF)

@@ -444,21 +444,43 @@ def _check_on_grid(
     zone: tzinfo,
     labels: RowLabels | None,
 ) -> None:
+    """Refuse rows between the clock's instants (data sampled at the study step).
+
+    Where most rows share one offset from the clock, the whole record is shifted:
+    the message offers ``data.start`` on the data's own instants. Where a few rows
+    are off (a stray ``05:45`` in half-hourly data), it names them and offers to
+    remove or correct them, or to interpolate (``data.resample``); moving the
+    clock would put every other row off it.
+    """
     off = inside[(t[inside] - first) % ns != 0]
-    if off.size:
-        step = format_duration(pd.Timedelta(ns))
-        if labels is not None:
-            rows = labels.rows(off)
-        else:
-            rows = _listed([local_text(v, zone) for v in t[off]])
-        start = pd.Timestamp(t[off[0]], tz="UTC").tz_convert(zone)
-        raise DataError(
-            f"timestamps {rows} are not on the study clock (instants "
-            f"{local_text(first, zone)} + k × {step})",
-            hint=f"set data.start = '{start:%Y-%m-%dT%H:%M:%S}' to start the clock on the "
-            "data's own instants",
-            source=source,
+    if not off.size:
+        return
+    step = format_duration(pd.Timedelta(ns))
+    if labels is not None:
+        rows = labels.rows(off)
+    else:
+        rows = _listed([local_text(v, zone) for v in t[off]])
+    one = off.size == 1
+    clock = f"on the study clock (instants {local_text(first, zone)} + k × {step})"
+    if one:
+        text = f"the timestamp {'on ' if labels is not None else ''}{rows} is not {clock}"
+    else:
+        text = f"the timestamps {'on ' if labels is not None else ''}{rows} are not {clock}"
+    phases, counts = np.unique((t[off] - first) % ns, return_counts=True)
+    if counts.max() * 2 > inside.size:  # most rows share one offset: the record is shifted
+        phase = phases[np.argmax(counts)]
+        start = pd.Timestamp(t[off[(t[off] - first) % ns == phase][0]], tz="UTC").tz_convert(zone)
+        hint = (
+            f"set data.start = '{start:%Y-%m-%dT%H:%M:%S}' to start the clock on the data's "
+            "own instants"
         )
+    else:
+        which = "that row" if one else f"those {off.size} rows"
+        hint = (
+            f"remove or correct {which} in the file (the other rows are on the clock), or "
+            "set data.resample = 'linear' to interpolate the samples onto the study clock"
+        )
+    raise DataError(text, hint=hint, source=source)
 
 
 def _bin_means(

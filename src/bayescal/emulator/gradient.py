@@ -40,6 +40,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
+from bayescal.design import log_gamma, log_gamma_of_log
 from bayescal.emulator.hyper import HyperLayout, HyperPriors, log_prior_beta
 from bayescal.emulator.kernel import LOG_2PI, FloatArray
 from bayescal.emulator.kron import Lru, SymEig
@@ -215,7 +216,7 @@ class LogScalePosterior(Eq9Data):
         if not (np.all(np.isfinite(block)) and tau > 0.0):
             return BasisTerm(-math.inf, zero, 0.0)
         prior = log_prior_beta(beta, pr.rho_a, pr.rho_b)
-        prior += (pr.tau_shape - 1.0) * math.log(tau) - pr.tau_rate * tau
+        prior += log_gamma(tau, pr.tau_shape, pr.tau_rate)
         if prior == -math.inf:
             return BasisTerm(-math.inf, zero, 0.0)
         bt, bx = beta[: self.t], beta[self.t :]
@@ -264,8 +265,7 @@ class LogScalePosterior(Eq9Data):
     def lam_term(self, u_lam: float) -> tuple[float, float]:
         """Prior of ``lambda`` plus its Jacobian on the log scale, and its derivative."""
         shape, rate = self.lam_prior
-        lam = math.exp(u_lam)
-        return (shape - 1.0) * u_lam - rate * lam + u_lam, shape - rate * lam
+        return log_gamma_of_log(u_lam, shape, rate) + u_lam, shape - rate * math.exp(u_lam)
 
     def value_and_grad(self, u: ArrayLike) -> tuple[float, FloatArray]:
         """Log-scale log posterior and its gradient ``(d,)`` at ``u``."""

@@ -2,12 +2,15 @@
 
 Every size a study sets (``[design] runs``, the record's samples and periods,
 ``[emulator] samples`` and basis size, ``[calibration] chains`` x ``samples``,
-``[discrepancy]`` realisations and samples, ``[predict]`` draws and runs)
-implies arrays in memory and files in the output folder. :func:`estimate`
-adds up the largest of them from the validated study and its measured data,
-and :func:`check_budget` refuses, in one line naming the key at fault and the
-estimate, a study that would not fit: ``bayescal validate`` calls it, and
-``bayescal run`` before its first stage.
+``[discrepancy]`` realisations and samples, ``[predict]`` draws and runs,
+``[screening] trajectories``) implies arrays in memory and files in the output
+folder. :func:`estimate` adds up the largest of them from the validated study
+and its measured data, and :func:`check_budget` refuses, in one line naming the
+key at fault and the estimate, a study that would not fit: ``bayescal
+validate`` calls it, ``bayescal run`` before its first stage and ``bayescal
+screen`` (on the screening's part, :func:`screening_need`) before its first
+simulation. Where two keys multiply (chains x samples), the message names the
+one further above its default, the one most likely mistyped.
 
 The limits are, in this order: ``[runner] max_memory`` / ``max_disk`` of the
 study, the environment variables ``BAYESCAL_MAX_MEMORY`` / ``BAYESCAL_MAX_DISK``
@@ -27,6 +30,7 @@ from __future__ import annotations
 import contextlib
 import os
 import shutil
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -37,6 +41,7 @@ from bayescal.errors import ConfigError
 
 if TYPE_CHECKING:
     from bayescal.config import Study
+    from bayescal.config.base import Section
     from bayescal.data.measured import MeasuredData
 
 __all__ = [
@@ -47,6 +52,7 @@ __all__ = [
     "estimate",
     "format_bytes",
     "machine_memory",
+    "screening_need",
 ]
 
 MEMORY_VARIABLE = "BAYESCAL_MAX_MEMORY"
@@ -88,13 +94,50 @@ def format_bytes(size: float) -> str:
     return f"{size:.0f} B"
 
 
+def _out_of_proportion(*keys: tuple[Section, str, str]) -> str:
+    """Of the keys that multiply into one size (``(section, field, "section.field")``),
+    the one furthest above its default: where ``chains = 100000000`` makes the
+    calibration's draws absurd, the message names ``calibration.chains``, not
+    ``calibration.samples``. Ties go to the first."""
+
+    def ratio(item: tuple[Section, str, str]) -> float:
+        section, name, _ = item
+        usual = type(section).model_fields[name].default
+        return float(getattr(section, name)) / float(usual or 1)
+
+    return max(keys, key=ratio)[2]
+
+
+def screening_need(study: Study, measured: MeasuredData) -> Need:
+    """What ``bayescal screen`` needs: ``trajectories x (parameters + 1)`` simulator runs
+    (:mod:`bayescal.pipeline.screen`), cached in ``OUTPUT_DIR/simulations`` like the
+    design's, and the Morris tables of ``OUTPUT_DIR/screening``."""
+    s = study
+    k, n = len(s.parameters), int(measured.n)
+    trajectories = int(s.screening.trajectories)
+    runs = trajectories * (k + 1)
+    outputs_sim = max(len(s.simulator.output_names()), len(s.outputs.calibrate))
+    word = "output" if outputs_sim == 1 else "outputs"
+    q = len(s.outputs.calibrate)
+    return Need(
+        "screening",
+        "screening.trajectories",
+        f"{trajectories} trajectories × ({k} parameters + 1) = {runs} runs × {n} samples × "
+        f"{outputs_sim} {word}",
+        2.0 * runs * (outputs_sim * n + 2 * k + q) * _F,  # results, design (unit and values)
+        runs * (outputs_sim * n * _F + 4096.0) + 3.0 * runs * (k + q) * _F,  # cache, tables
+    )
+
+
 def estimate(study: Study, measured: MeasuredData) -> list[Need]:
     """Memory and disk of each part of ``study`` on its measured record.
 
     Returns
     -------
     list of Need
-        One entry per part, largest-memory first.
+        One entry per part, largest-memory first. The screening's part
+        (:func:`screening_need`) is counted where the study screens: it has
+        candidates (``screen = true``) or a ``[screening]`` section.
     """
     s = study
     t, runs, n = len(s.parameters), int(s.design.runs), int(measured.n)
@@ -163,7 +206,9 @@ def estimate(study: Study, measured: MeasuredData) -> list[Need]:
         ),
         Need(
             "calibration draws",
-            "calibration.samples",
+            _out_of_proportion(
+                (cal, "samples", "calibration.samples"), (cal, "chains", "calibration.chains")
+            ),
             f"{cal.chains} chains × {cal.samples} samples × {t + 4} variables",
             3.0 * kept * (t + 4) * _F,
             3.0 * kept * (t + 4) * _F,  # posterior.nc (twice) and the checkpoints
@@ -172,10 +217,19 @@ def estimate(study: Study, measured: MeasuredData) -> list[Need]:
     if s.discrepancy.enabled:
         disc = s.discrepancy
         draws = cal.chains * d_samples * (t + 4 + disc.realisations // 10 + 1)
+        samples_key = (
+            (cal, "samples", "calibration.samples")
+            if disc.samples is None
+            else (disc, "samples", "discrepancy.samples")
+        )
         needs.append(
             Need(
                 "discrepancy",
-                "discrepancy.realisations",
+                _out_of_proportion(
+                    (disc, "realisations", "discrepancy.realisations"),
+                    samples_key,
+                    (cal, "chains", "calibration.chains"),
+                ),
                 f"{disc.realisations} realisations × {m} periods × {rows} rows, "
                 f"{cal.chains} chains × {d_samples} samples",
                 (2.0 * disc.realisations * m * rows + draws) * _F,
@@ -202,6 +256,8 @@ def estimate(study: Study, measured: MeasuredData) -> list[Need]:
                 20.0 * q * n * _F,
             )
         )
+    if s.candidates or "screening" in s.model_fields_set:
+        needs.append(screening_need(s, measured))
     needs.append(Need("report and records", "", "", 0.0, _FIXED_DISK))
     return sorted(needs, key=lambda need: -need.memory)
 
@@ -255,7 +311,13 @@ def _limit(given: int | None, variable: str, key: str) -> tuple[int | None, str]
     return None, ""
 
 
-def check_budget(study: Study, measured: MeasuredData, out: Path | None = None) -> list[Need]:
+def check_budget(
+    study: Study,
+    measured: MeasuredData,
+    out: Path | None = None,
+    *,
+    needs: Sequence[Need] | None = None,
+) -> list[Need]:
     """Refuse a study whose estimated memory or disk exceeds the limits.
 
     Parameters
@@ -267,6 +329,9 @@ def check_budget(study: Study, measured: MeasuredData, out: Path | None = None) 
     out
         The output folder (its file system's free space is the disk limit);
         ``study.root / study.study.output_dir`` when omitted.
+    needs
+        The parts to check (``bayescal screen``: :func:`screening_need` only);
+        :func:`estimate` of the whole study when omitted.
 
     Returns
     -------
@@ -279,7 +344,7 @@ def check_budget(study: Study, measured: MeasuredData, out: Path | None = None) 
         One line: the key at fault and its value, the estimate, the limit, and
         how to raise it.
     """
-    needs = estimate(study, measured)
+    needs = estimate(study, measured) if needs is None else list(needs)
     folder = out if out is not None else study.root / study.study.output_dir
     memory = sum(need.memory for need in needs)
     limit, origin = _limit(study.runner.max_memory, MEMORY_VARIABLE, "max_memory")

@@ -11,13 +11,20 @@ indices and the proposal (:mod:`bayescal.screening`), and writes
 :mod:`bayescal.report.screening`). ``apply=True`` then marks the proposed
 parameters to be calibrated in the study file
 (:func:`bayescal.config.edit.set_screen_flags`).
+
+Like ``run``, ``screen`` checks the memory and disk its runs need before the
+first one (:func:`bayescal.pipeline.budget.screening_need`), holds the output
+folder's lock while it writes there (:class:`bayescal.store.folder.OutputLock`:
+a ``run`` or another ``screen`` of the same folder is refused, naming the
+holder) and reports an ``OSError`` of the output side in one line
+(:func:`bayescal.pipeline.run.writing`).
 """
 
 from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -27,7 +34,9 @@ from bayescal.config.edit import set_screen_flags
 from bayescal.data.measured import MeasuredData, load_measured
 from bayescal.design import Design
 from bayescal.errors import ConfigError
+from bayescal.pipeline.budget import check_budget, screening_need
 from bayescal.pipeline.keys import derived_seed
+from bayescal.pipeline.run import writing
 from bayescal.pipeline.stages import Options
 from bayescal.report.screening import write_screening_report
 from bayescal.runner import RunResults, run_design
@@ -39,7 +48,9 @@ from bayescal.screening import (
     morris_indices,
     propose,
 )
+from bayescal.simulators.base import Simulator
 from bayescal.store import screening as store
+from bayescal.store.folder import OutputLock
 
 __all__ = ["ScreeningResult", "screen", "screening_statistic"]
 
@@ -152,37 +163,78 @@ def screen(
     Raises
     ------
     ConfigError
-        Fewer than two parameters, SALib missing, or fewer than two complete
-        trajectories.
+        Fewer than two parameters, SALib missing, fewer than two complete
+        trajectories, or more trajectories than memory or disk allow.
+    OutputError
+        If the output folder is in use by another ``run`` or ``screen`` (its
+        lock), or cannot be written (permission, a full or read-only disk, a
+        file in its place): one line naming the path.
     """
     start = time.perf_counter()
     options = options or Options()
     note = say or (lambda _: None)
-    section = study.screening
     measured = load_measured(study)
+    out = study.root / study.study.output_dir
+    need = screening_need(study, measured)
+    check_budget(study, measured, out, needs=[need])  # before the design is drawn
+    section = study.screening
     simulator = build_simulator(study, screening=True)
     priors = study.screening_priors()
     seed = section.seed if section.seed is not None else derived_seed(study.study.seed, "screen")
     morris = morris_design(list(priors), section.trajectories, section.levels, seed)
-    note(
-        f"screen: {len(priors)} parameters ({len(study.candidates)} candidates), "
-        f"{section.trajectories} trajectories, {morris.runs} runs"
-    )
     design = Design(priors, morris.unit, seed=seed)
+    with writing(out, need.disk), OutputLock(out, command="screen") as lock:
+        if lock.took_over:
+            note(lock.describe_taken_over())
+        note(
+            f"screen: {len(priors)} parameters ({len(study.candidates)} candidates), "
+            f"{section.trajectories} trajectories, {morris.runs} runs"
+        )
+        runs = _run(study, measured, simulator, design, out / "simulations", options)
+        result = _write(study, measured, morris, design, seed, runs, out, start)
+    if apply:
+        flags = {name: name not in result.proposal.selected for name in study.parameters}
+        applied = set_screen_flags(study.path, flags)
+        result = replace(result, applied=tuple(applied))
+    return replace(result, seconds=time.perf_counter() - start)
+
+
+def _run(
+    study: Study,
+    measured: MeasuredData,
+    simulator: Simulator,
+    design: Design,
+    cache: Path,
+    options: Options,
+) -> RunResults:
+    """The Morris design's runs, cached with the design's, with the progress bar."""
     factory = options.progress
     progress, close = factory(design.runs) if factory is not None else (None, lambda: None)
-    out = study.root / study.study.output_dir
     try:
-        runs = run_design(
+        return run_design(
             simulator,
             measured.forcing,
             design,
-            cache_dir=out / "simulations",
+            cache_dir=cache,
             progress=progress,
             **_runner_options(study, options),  # type: ignore[arg-type]
         )
     finally:
         close()
+
+
+def _write(
+    study: Study,
+    measured: MeasuredData,
+    morris: MorrisDesign,
+    design: Design,
+    seed: int,
+    runs: RunResults,
+    out: Path,
+    start: float,
+) -> ScreeningResult:
+    """The Morris indices of each calibrated output, the proposal and their files."""
+    section = study.screening
     samples = _training_samples(measured)
     statistics, indices = {}, []
     for k, output in enumerate(study.outputs.calibrate):
@@ -197,7 +249,7 @@ def screen(
     proposal = propose(indices, section.threshold, section.max_parameters)
     folder = out / store.FOLDER
     facts = {
-        "parameters": f"{len(priors)} ({len(study.candidates)} candidates)",
+        "parameters": f"{len(design.names)} ({len(study.candidates)} candidates)",
         "runs": f"{design.runs} ({runs.n_cached} from the cache, {runs.n_failed} failed)",
         "trajectories × levels": f"{section.trajectories} × {section.levels}",
         "statistic": f"{section.statistic} over {samples.size} training samples",
@@ -222,10 +274,6 @@ def screen(
         statistic=section.statistic,
         facts=facts,
     )
-    applied: list[str] = []
-    if apply:
-        flags = {name: name not in proposal.selected for name in study.parameters}
-        applied = set_screen_flags(study.path, flags)
     return ScreeningResult(
         design=morris,
         runs=runs,
@@ -235,5 +283,4 @@ def screen(
         folder=folder,
         page=page,
         seconds=time.perf_counter() - start,
-        applied=tuple(applied),
     )

@@ -1,7 +1,7 @@
 """The output folder itself: who may write it (a lock) and what to do when it cannot be written.
 
-:class:`OutputLock` is held by ``bayescal run`` (and ``bayescal report``)
-for as long as they write a study's output folder. It is an advisory lock
+:class:`OutputLock` is held by ``bayescal run``, ``bayescal screen`` and
+``bayescal report`` for as long as they write a study's output folder. It is an advisory lock
 (``fcntl.flock``) on ``bayescal.lock`` in the folder, which also records who
 holds it (process, host, command, start time). A second run of the same study
 finds the lock held and stops with a :class:`~bayescal.errors.OutputError`
