@@ -7,12 +7,14 @@ BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed-stamp
 EXTRAS ?= dev,energyplus,dask,fmu
 
-.PHONY: demo test test-fast validate check bench docs clean help
+.PHONY: demo test test-fast test-slow validate check bench docs clean help
 
 help:
 	@echo "make demo   - set up .venv and run the paper's wall example end to end"
-	@echo "make test   - set up .venv and run the whole test suite"
+	@echo "make test   - set up .venv and run the fast suite: every module, in minutes (-m 'not slow')"
+	@echo "make test-slow - the full-size statistical and physics tests (-m slow, not tests/validation)"
 	@echo "make validate - known-truth coverage at full size (10 truths per experiment, ~25 min)"
+	@echo "               (CI runs test, test-slow and validate: together, every test)"
 	@echo "make check  - ruff (lint + format check) and mypy"
 	@echo "make bench  - the quick benchmark set (ratios measured in one process)"
 
@@ -27,17 +29,23 @@ $(STAMP): pyproject.toml | $(BIN)/python
 demo: $(STAMP)
 	$(BIN)/python -m bayescal.demo
 
+# The fast suite: every test not marked slow (issue 18: minutes on 2 cores).
 test: $(STAMP)
-	$(BIN)/python -m pytest
+	$(BIN)/python -m pytest -m "not slow"
 
-# The coverage experiments of tests/validation at the size of issue 15's acceptance;
-# `make test` runs the same tests over 2 truths each.
+# The slow tests (full-size statistical and physics runs, the case studies) except the
+# coverage experiments of tests/validation, which `make validate` runs at full size.
+test-slow: $(STAMP)
+	$(BIN)/python -m pytest -m slow --ignore=tests/validation
+
+# The coverage experiments of tests/validation (all marked slow) at the size of issue
+# 15's acceptance.
 validate: $(STAMP)
 	OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 BAYESCAL_VALIDATION_TRUTHS=10 \
 		$(BIN)/python -m pytest tests/validation
 
-test-fast: $(STAMP)
-	$(BIN)/python -m pytest -m "not slow"
+# The same as `make test` (kept for those who type it).
+test-fast: test
 
 check: $(STAMP)
 	$(BIN)/ruff check src tests benchmarks

@@ -18,6 +18,16 @@ own settings and the default options, and prints one table:
   R-hat <= 1.01 and every bulk and tail ESS >= 400 in every phase; the
   ``misses`` column says what failed.
 
+The ``office`` example (the DOE small office in EnergyPlus) is listed but not
+run unless asked for (``--office``, or by naming it): its study marks every
+parameter as a screening candidate, so ``bayescal run`` refuses it until
+``bayescal screen --apply`` has chosen the parameters, and the two together are
+about 400 EnergyPlus runs, some 26 minutes on the 2-core machine
+(docs/case-studies.md; ``scripts/office_case_study.py`` prints its full
+results). Run, it goes the user's way: Morris screening with ``--apply``
+(its time is the ``screen`` column), then the pipeline; its end-to-end time
+includes the screening.
+
 BLAS and OpenMP are single-threaded (set before numpy is imported); chains and
 simulations use the default backends (worker processes where the defaults say
 so). The load average is printed before and after: the goal is stated for the
@@ -25,7 +35,8 @@ idle 2-core machine.
 
 Run::
 
-    .venv/bin/python benchmarks/bench_examples.py                 # all examples
+    .venv/bin/python benchmarks/bench_examples.py                 # all but office
+    .venv/bin/python benchmarks/bench_examples.py --office        # all, office included
     .venv/bin/python benchmarks/bench_examples.py wall box-freefloat
     .venv/bin/python benchmarks/bench_examples.py --keep DIR      # keep the study folders
 """
@@ -40,6 +51,7 @@ for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
 import argparse  # noqa: E402
 import json  # noqa: E402
 import resource  # noqa: E402
+import shutil  # noqa: E402
 import sys  # noqa: E402
 import tempfile  # noqa: E402
 import time  # noqa: E402
@@ -54,15 +66,32 @@ sys.path.insert(0, str(REPO / "scripts"))
 from run_case_studies import CaseError, prepare_case  # noqa: E402
 
 from bayescal.config import load_study  # noqa: E402
-from bayescal.examples import available  # noqa: E402
+from bayescal.errors import BayescalError  # noqa: E402
+from bayescal.examples import available, copy_example  # noqa: E402
 from bayescal.mcmc.diagnostics import Diagnostics  # noqa: E402
 from bayescal.pipeline import Options, run  # noqa: E402
+from bayescal.pipeline.screen import screen  # noqa: E402
 
 GOAL_SECONDS = 60.0
 GOAL_RHAT = 1.01
 GOAL_ESS = 400.0
-STAGES = ("design", "simulate", "emulator", "calibrate", "discrepancy", "predict", "report")
+STAGES = (
+    "screen",
+    "design",
+    "simulate",
+    "emulator",
+    "calibrate",
+    "discrepancy",
+    "predict",
+    "report",
+)
 SHORT = {"calibrate": "cal", "discrepancy": "disc"}
+#: The example that screens before it runs, and why it is not run by default.
+OFFICE = "office"
+OFFICE_NOT_RUN = (
+    "not run: EnergyPlus, screen --apply then run, about 400 runs, ~26 min on 2 cores "
+    "(docs/case-studies.md); --office runs it, scripts/office_case_study.py gives its results"
+)
 
 
 @dataclass
@@ -115,8 +144,11 @@ class Row:
     cpu: float = float("nan")
     phases: list[Phase] = field(default_factory=list)
     error: str = ""
+    not_run: str = ""
 
     def misses(self) -> list[str]:
+        if self.not_run:
+            return [self.not_run]
         if self.error:
             return [self.error]
         out = [] if self.total <= GOAL_SECONDS else [f"{self.total:.0f} s > {GOAL_SECONDS:.0f} s"]
@@ -133,20 +165,33 @@ def cpu_seconds() -> float:
 
 
 def run_example(name: str, parent: Path, until: str) -> Row:
-    """Copy, run and diagnose one example."""
+    """Copy, run and diagnose one example (the office one screened first, with --apply)."""
     row = Row(name)
     folder = parent / name
     try:
-        prepare_case(name, folder, fresh=True)
+        if name == OFFICE:  # no preparation, but fresh like the others
+            shutil.rmtree(folder, ignore_errors=True)
+            copy_example(name, folder)
+        else:
+            prepare_case(name, folder, fresh=True)
     except CaseError as exc:
         row.error = f"skipped: {exc}"
         return row
     cpu0, start = cpu_seconds(), time.perf_counter()
-    res = run(load_study(folder), until=until, options=Options())
+    screened = None
+    try:
+        if name == OFFICE:
+            screened = screen(load_study(folder), options=Options(), apply=True)
+        res = run(load_study(folder), until=until, options=Options())
+    except BayescalError as exc:
+        row.error = f"failed: {exc.one_line()}"
+        return row
     row.total = time.perf_counter() - start
     row.cpu = cpu_seconds() - cpu0
     record = json.loads((res.context.out / "stages.json").read_text(encoding="utf-8"))
-    row.times = {stage: float(entry["seconds"]) for stage, entry in record.items()}
+    if screened is not None:
+        row.times["screen"] = screened.seconds
+    row.times |= {stage: float(entry["seconds"]) for stage, entry in record.items()}
     if res.posterior is not None:
         row.phases.append(
             Phase("calibrate", row.times.get("calibrate", 0.0), res.posterior.diagnostics)
@@ -177,8 +222,8 @@ def print_table(rows: list[Row]) -> None:
     ]
     print(" ".join(head))
     for r in rows:
-        if r.error:
-            print(f"{r.name:14s} {r.error}")
+        if r.not_run or r.error:
+            print(f"{r.name:14s} {r.not_run or r.error}")
             continue
         cells = [f"{r.name:14s}"] + [f"{r.times.get(s, float('nan')):8.1f}" for s in stage_cols]
         cells += [f"{r.total:7.1f}", f"{r.cpu:7.1f}"]
@@ -202,14 +247,27 @@ def print_table(rows: list[Row]) -> None:
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("examples", nargs="*", help="examples to run (default: all)")
+    parser.add_argument(
+        "examples",
+        nargs="*",
+        help="examples to run (default: all; office listed, not run, without --office)",
+    )
     parser.add_argument("--keep", type=Path, help="folder for the study folders (kept)")
     parser.add_argument("--until", default="report", choices=["predict", "report"])
+    parser.add_argument(
+        "--office",
+        action="store_true",
+        help="also run the office example (EnergyPlus: screen --apply, then run; ~26 min)",
+    )
     opts = parser.parse_args()
-    names = opts.examples or available()
+    names = list(opts.examples or available())
     unknown = sorted(set(names) - set(available()))
     if unknown:
         parser.error(f"unknown examples {unknown}; choose from {available()}")
+    if opts.office and OFFICE not in names:
+        names.append(OFFICE)
+    # named on the command line, or asked for with --office: run; else listed as not run
+    run_office = opts.office or OFFICE in opts.examples
     print(
         f"examples end to end ({', '.join(names)}); BLAS threads 1, {os.cpu_count()} CPUs, "
         f"load average at start {os.getloadavg()[0]:.1f}; goal: <= {GOAL_SECONDS:.0f} s, "
@@ -220,12 +278,17 @@ def main() -> int:
         parent = opts.keep if opts.keep is not None else Path(tmp)
         parent.mkdir(parents=True, exist_ok=True)
         for name in names:
+            if name == OFFICE and not run_office:
+                rows.append(Row(name, not_run=OFFICE_NOT_RUN))
+                print(f"  {name}: {OFFICE_NOT_RUN}", flush=True)
+                continue
             rows.append(run_example(name, parent, opts.until))
-            print(f"  {name}: {rows[-1].total:.1f} s", flush=True)
+            row = rows[-1]
+            print(f"  {name}: {row.error or f'{row.total:.1f} s'}", flush=True)
     print()
     print_table(rows)
     print(f"\nload average at end {os.getloadavg()[0]:.1f} (times are wall times)")
-    return 0
+    return 1 if any(r.error.startswith("failed") for r in rows) else 0
 
 
 if __name__ == "__main__":
