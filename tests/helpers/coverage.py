@@ -4,9 +4,11 @@ One *case* draws a truth inside the paper's priors, makes the virtual
 experiment (white or AR(1) measurement noise; the measuring wall may have a
 layer the calibrated model lacks), assembles it with one scale per output,
 trains the emulator, calibrates with a chosen error model and predicts by
-re-running the simulator at posterior draws. It returns whether each 95 %
-parameter interval covers the truth and the coverage of the 95 % and 50 %
-prediction bands of the measurements on the training and test windows.
+re-running the simulator at posterior draws (an in-likelihood discrepancy
+conditioned on the training residuals, as ``bayescal run`` does). It returns
+whether each 95 % parameter interval covers the truth and the coverage of the
+95 % and 50 % prediction bands of the measurements on the training and test
+windows.
 """
 
 from __future__ import annotations
@@ -17,15 +19,24 @@ import numpy as np
 
 from bayescal.calibration.posterior import Posterior, calibrate
 from bayescal.emulator.assemble import Assembled, NoiseSpec, assemble
-from bayescal.emulator.noise import ErrorModel
+from bayescal.emulator.gp import Emulator
+from bayescal.emulator.noise import ErrorModel, ObservationModel
 from bayescal.emulator.training import train
-from bayescal.pipeline.predict import simulator_band
+from bayescal.pipeline.predict import conditioned_discrepancy, predict_band, simulator_band
 from bayescal.simulators.wall import MultilayerWall
-from virtual_wall import PRIORS, paper_wall, random_truth, simulate, virtual_experiment
+from virtual_wall import (
+    NOISE_VARIANCE,
+    PRIORS,
+    paper_wall,
+    random_truth,
+    simulate,
+    virtual_experiment,
+)
 
 #: Settings of one case (reduced from the example's: the truth is sharp after ~2000 draws).
 TRAIN_DAYS, TEST_DAYS = 20, 4
 BAND_RUNS = 40
+EMULATOR_DRAWS = 100  # draws propagated through the emulator for its band
 
 
 @dataclass(frozen=True)
@@ -39,6 +50,9 @@ class CaseResult:
     band50: dict[str, float]
     posterior: Posterior
     samples: dict[str, int]  # window -> number of measured samples scored
+    noise_covered: bool  # the 95 % interval of the noise SD holds the injected one
+    emulator95: dict[str, float]  # the same shares for the band of [predict] method = "emulator"
+    emulator50: dict[str, float]
 
 
 def windows(a: Assembled) -> dict[str, np.ndarray]:
@@ -54,12 +68,16 @@ def windows(a: Assembled) -> dict[str, np.ndarray]:
 
 def band_coverage(
     a: Assembled, post: Posterior, measured: dict[str, np.ndarray], runs: dict[str, np.ndarray],
-    pick: np.ndarray,
+    pick: np.ndarray, emulator: Emulator | None = None,
 ) -> dict[str, dict[str, tuple[float, float]]]:  # fmt: skip
     """Per output and window, the shares of measured samples inside the 95 % and
-    50 % bands built from simulator ``runs`` at the posterior draws ``pick``."""
+    50 % bands built from simulator ``runs`` at the posterior draws ``pick``: the
+    band ``bayescal run`` prints with ``[predict] method = "simulator"`` (with an
+    in-likelihood discrepancy conditioned on the training residuals, which needs
+    the ``emulator``)."""
     lam = post.lam_stars.reshape(-1, post.lam_stars.shape[-1])
-    band = simulator_band(a, runs, lam[pick], measured=measured)
+    error = {} if emulator is None else conditioned_discrepancy(emulator, a, post, pick, runs)
+    band = simulator_band(a, runs, lam[pick], measured=measured, model_error=error)
     out: dict[str, dict[str, tuple[float, float]]] = {}
     for name, y_all in measured.items():
         out[name] = {}
@@ -78,14 +96,17 @@ def draw_picks(post: Posterior, n: int = BAND_RUNS) -> np.ndarray:
 
 
 def _band_coverage(
-    a: Assembled, post: Posterior, measured: np.ndarray, boundary: dict[str, np.ndarray]
-) -> tuple[dict[str, float], dict[str, float]]:
+    a: Assembled, em: Emulator, post: Posterior, measured: np.ndarray,
+    boundary: dict[str, np.ndarray],
+) -> tuple[dict[str, float], dict[str, float]]:  # fmt: skip
     theta = post.draws.reshape(-1, len(post.names))
     pick = draw_picks(post)
     runs = np.array(
         [simulate(boundary, dict(zip(post.names, row, strict=True))) for row in theta[pick]]
     )
-    cover = band_coverage(a, post, {"heat_flux_in": measured}, {"heat_flux_in": runs}, pick)
+    cover = band_coverage(
+        a, post, {"heat_flux_in": measured}, {"heat_flux_in": runs}, pick, emulator=em
+    )
     flux = cover["heat_flux_in"]
     return {w: v[0] for w, v in flux.items()}, {w: v[1] for w, v in flux.items()}
 
@@ -139,11 +160,40 @@ def run_case(
     covered = {
         n: bool(lo <= truth[n] <= hi) for n, lo, hi in zip(post.names, lower, upper, strict=True)
     }
-    band95, band50 = _band_coverage(a, post, ve.measured["heat_flux_in"], ve.boundary)
+    band95, band50 = _band_coverage(a, em, post, ve.measured["heat_flux_in"], ve.boundary)
     samples = {w: int(m.sum()) for w, m in windows(a).items()}
+    sd_lo, sd_hi = np.quantile(post.noise_sd()["heat_flux_in"], [0.025, 0.975])
+    noise_sd = effective_noise_sd(a, ve.clean, float(np.mean(post.phi)) if post.phi.size else 0.0)
+    emulator = predict_band(em, a, post, draws=EMULATOR_DRAWS)
+    em95, em50 = {}, {}
+    y = ve.measured["heat_flux_in"]
+    for window, mask in windows(a).items():
+        lo, hi = emulator.lower["heat_flux_in"][mask], emulator.upper["heat_flux_in"][mask]
+        em95[window] = float(np.mean((y[mask] >= lo) & (y[mask] <= hi)))
+        lo, hi = emulator.lower50["heat_flux_in"][mask], emulator.upper50["heat_flux_in"][mask]
+        em50[window] = float(np.mean((y[mask] >= lo) & (y[mask] <= hi)))
     return CaseResult(
-        truth, covered, _derived_covered(post, truth, true_wall), band95, band50, post, samples
-    )
+        truth, covered, _derived_covered(post, truth, true_wall), band95, band50, post, samples,
+        bool(sd_lo <= noise_sd <= sd_hi), em95, em50,
+    )  # fmt: skip
+
+
+def effective_noise_sd(a: Assembled, clean: np.ndarray, phi: float = 0.0) -> float:
+    """What the calibration's noise SD estimates: the injected noise and the part of the
+    noise-free measurement the output basis cannot represent.
+
+    lambda* is learnt from the measured periods' residual outside the basis (the
+    remainder of :mod:`bayescal.emulator.noise`, ``m* (n - p)`` degrees of freedom):
+    the sensor's noise there, plus the noise-free signal's own out-of-basis part
+    (in the error model's metric), which the model at theta* lacks too.
+    """
+    obs = a.observations
+    clean_std = a.outputs.apply({"heat_flux_in": a.layout.cut(clean)})
+    model = ObservationModel(obs.outputs, obs.k, clean_std)
+    o = obs.outputs[0]
+    quad = model.gls(0, phi).quad0 if o.model == "ar1" else model.gls(0, 0.0).quad0
+    dof = clean_std.shape[1] * (o.n - o.p)
+    return float(np.sqrt(NOISE_VARIANCE + o.scale**2 * quad / dof))
 
 
 def _derived_covered(

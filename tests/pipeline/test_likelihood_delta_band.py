@@ -1,26 +1,32 @@
-"""The band of an output with an in-likelihood discrepancy includes the discrepancy.
+"""The band of an output with an in-likelihood discrepancy: conditioned on the training residuals.
 
 ``[outputs.errors.X] discrepancy = true`` adds ``GP(0, r tau_j^-1 c_x)`` to each
-of the output's basis weights in the likelihood; a new measurement then differs
-from the model by ``K delta`` besides the noise. The variance that the band adds
-is checked against draws of ``K delta`` (Monte Carlo, tolerance from its
-standard error), and the band with it is wider than without.
+of the output's basis weights in the likelihood. Predictions condition it on the
+measured training periods at every posterior draw
+(:func:`bayescal.pipeline.predict.conditioned_discrepancy`; the Gaussian algebra
+is checked against dense conditioning in ``tests/calibration/test_conditional.py``).
+Here: that the series are placed on the right samples in physical units, for the
+simulator and the emulator routes, by a limit with a known answer (a discrepancy
+as large as the prior allows and almost no noise reproduces the measured weights),
+and that the band uses it.
 """
 
 from __future__ import annotations
 
+import dataclasses
 from typing import Any
 
 import numpy as np
 import pytest
 
-from bayescal.calibration.posterior import calibrate
+from bayescal.calibration.posterior import Posterior, calibrate
 from bayescal.emulator.assemble import NoiseSpec, assemble
-from bayescal.pipeline.predict import likelihood_delta_variance, simulator_band
+from bayescal.pipeline.predict import conditioned_discrepancy, predict_band, simulator_band
+from virtual_wall import simulate
 
 
 @pytest.fixture(scope="module")
-def with_delta(small_wall: tuple[Any, Any, Any]) -> tuple[Any, Any, Any]:
+def with_delta(small_wall: tuple[Any, Any, Any]) -> tuple[Any, Any, Any, Any]:
     ve, _, em = small_wall
     a = assemble(
         ve.design, ve.runs, ve.measured, ve.boundary, ve.layout, components=2,
@@ -28,38 +34,92 @@ def with_delta(small_wall: tuple[Any, Any, Any]) -> tuple[Any, Any, Any]:
     )  # fmt: skip
     post = calibrate(em, a, n_chains=2, n_burn=100, n_draws=50, seed=3, backend="serial",
                      observations=a.observations)  # fmt: skip
-    return a, em, post
+    return ve, a, em, post
 
 
-def test_added_variance_is_that_of_the_discrepancys_draws(with_delta: tuple[Any, Any, Any]) -> None:
-    a, em, post = with_delta
-    var = likelihood_delta_variance(em, a, post)["heat_flux_in"]
-    draws = post.draws.shape[0] * post.draws.shape[1]
-    assert var.shape == (draws, a.layout.n_total)
-    # One draw: delta_j ~ N(0, r / tau_j) per basis, y = sd * (K delta), per sample.
-    r = float(post.aux.reshape(draws, -1)[0, post.aux_names.index("delta_rel")])
-    rng = np.random.default_rng(0)
-    n = 40_000
-    tau_inv = np.array([k.variance for k in em.kernels])
-    delta = rng.normal(size=(n, tau_inv.size)) * np.sqrt(r * tau_inv)
-    sl = a.outputs.slices["heat_flux_in"]
-    y = (delta @ np.asarray(em.basis.k)[sl].T) * a.outputs.sd[sl]
-    empirical = y.var(axis=0)
-    start = int(a.layout.train_starts[0])
-    want = var[0, start : start + a.layout.period]
-    # The variance of a sample variance of n Gaussian draws is 2 sigma^4 / (n - 1).
-    np.testing.assert_allclose(empirical, want, rtol=5 * np.sqrt(2 / (n - 1)))
-    assert np.all(want > 0)
+def _sharp(post: Posterior) -> Posterior:
+    """The same draws with r = 1 and lambda* = 1e10: the discrepancy takes up every residual."""
+    aux = np.array(post.aux, dtype=float, copy=True)
+    aux[..., post.aux_names.index("delta_rel")] = 1.0
+    aux[..., post.aux_names.index("lambda_star")] = 1e10
+    return dataclasses.replace(post, aux=aux)
 
 
-def test_band_is_wider_with_the_discrepancy(with_delta: tuple[Any, Any, Any]) -> None:
-    a, em, post = with_delta
-    s = 20
-    sims = np.tile(np.asarray(a.layout.n_total * [0.0]), (s, 1))
-    lam = post.lam_stars.reshape(-1)[:s]
-    extra = likelihood_delta_variance(em, a, post)["heat_flux_in"][:s]
-    plain = simulator_band(a, {"heat_flux_in": sims}, lam)
-    wide = simulator_band(a, {"heat_flux_in": sims}, lam, model_error={"heat_flux_in": extra})
-    ok = np.isfinite(plain.upper["heat_flux_in"])
-    assert np.all(wide.upper["heat_flux_in"][ok] > plain.upper["heat_flux_in"][ok])
-    assert np.all(wide.lower["heat_flux_in"][ok] < plain.lower["heat_flux_in"][ok])
+def _train_mask(a: Any) -> np.ndarray:
+    mask = np.zeros(a.layout.n_total, dtype=bool)
+    for start in a.layout.train_starts:
+        mask[start : start + a.layout.period] = True
+    return mask
+
+
+def test_simulator_route_reproduces_the_measured_weights_in_the_limit(
+    with_delta: tuple[Any, Any, Any, Any],
+) -> None:
+    ve, a, em, post = with_delta
+    sharp = _sharp(post)
+    pick = np.arange(0, 100, 25)
+    theta = post.draws.reshape(-1, len(post.names))[pick]
+    runs = np.array(
+        [simulate(ve.boundary, dict(zip(post.names, row, strict=True))) for row in theta]
+    )
+    out = conditioned_discrepancy(em, a, sharp, pick, {"heat_flux_in": runs})
+    mean, var = out["heat_flux_in"]
+    mask = _train_mask(a)
+    assert mean.shape == var.shape == (pick.size, a.layout.n_total)
+    assert np.all(np.isnan(mean[:, ~mask]))
+    assert np.all(np.isfinite(mean[:, mask]))
+    # expected: the runs' weights replaced by the measured ones, in physical units
+    obs = a.observations
+    ko = obs.block(0)[0]
+    sd = a.outputs.sd[:, None]
+    measured_w = obs.weights_of(0, obs.y_star)
+    for s in range(pick.size):
+        y_sim = (a.layout.cut(runs[s]) - a.outputs.mean[:, None]) / sd
+        want = sd * (ko @ (measured_w - obs.weights_of(0, y_sim)).T)  # (n, m*)
+        got = a.layout.cut(mean[s])
+        np.testing.assert_allclose(got, want, rtol=0, atol=1e-6 * np.abs(want).max())
+        assert np.all(a.layout.cut(var[s]) < 1e-6 * np.abs(want).max() ** 2)
+    # with the calibration's own r and lambda* the shift is smaller and the variance not 0
+    mean0, var0 = conditioned_discrepancy(em, a, post, pick, {"heat_flux_in": runs})["heat_flux_in"]
+    assert np.all(var0[:, mask] > 0.0)
+    band = simulator_band(a, {"heat_flux_in": runs}, post.lam_stars.reshape(-1)[pick],
+                          model_error={"heat_flux_in": (mean0, var0)})  # fmt: skip
+    plain = simulator_band(a, {"heat_flux_in": runs}, post.lam_stars.reshape(-1)[pick])
+    np.testing.assert_allclose(
+        band.mean["heat_flux_in"][mask], (runs + mean0).mean(axis=0)[mask], rtol=1e-12
+    )
+    # in-sample the conditioned discrepancy pulls the prediction towards the measurement
+    y = ve.measured["heat_flux_in"][mask]
+    rmse = np.sqrt(np.mean((band.mean["heat_flux_in"][mask] - y) ** 2))
+    assert rmse < np.sqrt(np.mean((plain.mean["heat_flux_in"][mask] - y) ** 2))
+
+
+def test_emulator_route_reproduces_the_measured_weights_in_the_limit(
+    with_delta: tuple[Any, Any, Any, Any],
+) -> None:
+    _, a, em, post = with_delta
+    pick = np.arange(0, 100, 33)
+    mean, var = conditioned_discrepancy(em, a, _sharp(post), pick)["heat_flux_in"]
+    obs = a.observations
+    want = a.outputs.invert(obs.block(0)[0] @ obs.weights_of(0, obs.y_star).T)
+    for s in range(pick.size):
+        got = a.layout.cut(mean[s])
+        np.testing.assert_allclose(got, want, rtol=0, atol=1e-6 * np.abs(want).max())
+        # what is left is the emulator's out-of-basis variance 1 / lambda
+        np.testing.assert_allclose(
+            a.layout.cut(var[s]),
+            np.broadcast_to((a.outputs.sd**2 / em.lam)[:, None], got.shape),
+            rtol=1e-4,
+        )
+    band = predict_band(em, a, post, draws=20)
+    assert np.all(np.isfinite(band.mean["heat_flux_in"][_train_mask(a)]))
+
+
+def test_a_posterior_without_r_has_nothing_to_condition(
+    with_delta: tuple[Any, Any, Any, Any],
+) -> None:
+    _, a, em, post = with_delta
+    names = tuple(n for n in post.aux_names if n != "delta_rel")
+    keep = [post.aux_names.index(n) for n in names]
+    plain = dataclasses.replace(post, aux=post.aux[..., keep], aux_names=names)
+    assert conditioned_discrepancy(em, a, plain, np.arange(3)) == {}

@@ -42,6 +42,7 @@ import pytest
 from scipy import stats
 
 from coverage import CaseResult, run_case
+from virtual_wall import plastered_wall
 
 N_TRUTHS = int(os.environ.get("BAYESCAL_VALIDATION_TRUTHS", "2"))
 EXPERIMENTS = {
@@ -49,6 +50,7 @@ EXPERIMENTS = {
     "ar1": {"error_model": "ar1", "noise_phi": 0.8},
     "white-on-ar1": {"error_model": "white", "noise_phi": 0.8},
     "interval-means": {"error_model": "ar1", "means": True},
+    "plaster": {"error_model": "white", "true_wall": plastered_wall(), "discrepancy": True},
 }
 
 pytestmark = pytest.mark.slow
@@ -78,11 +80,18 @@ def _band_bounds(
     return min(issue[0], level - 3.5 * se), max(issue[1], level + 3.5 * se)
 
 
-def _bands_hold(cases: tuple[CaseResult, ...], phi: float = 0.0) -> None:
-    for window in ("train", "test"):
+def _bands_hold(
+    cases: tuple[CaseResult, ...],
+    phi: float = 0.0,
+    route: str = "simulator",
+    windows: tuple[str, ...] = ("train", "test"),
+) -> None:
+    for window in windows:
         n = sum(c.samples[window] for c in cases)
-        c95 = sum(c.band95[window] * c.samples[window] for c in cases) / n
-        c50 = sum(c.band50[window] * c.samples[window] for c in cases) / n
+        b95 = [c.band95 if route == "simulator" else c.emulator95 for c in cases]
+        b50 = [c.band50 if route == "simulator" else c.emulator50 for c in cases]
+        c95 = sum(b[window] * c.samples[window] for b, c in zip(b95, cases, strict=True)) / n
+        c50 = sum(b[window] * c.samples[window] for b, c in zip(b50, cases, strict=True)) / n
         lo95, hi95 = _band_bounds(0.95, (0.92, 0.98), n, phi)
         lo50, hi50 = _band_bounds(0.50, (0.45, 0.55), n, phi)
         assert lo95 <= c95 <= hi95, (window, c95, lo95, hi95)
@@ -94,7 +103,15 @@ def test_intervals_and_bands_cover_at_their_rates(name: str) -> None:
     cases = results(name)
     hits = [ok for c in cases for ok in c.covered.values()]
     assert sum(hits) >= binomial_floor(len(hits)), [c.covered for c in cases]
-    _bands_hold(cases, float(EXPERIMENTS[name].get("noise_phi", 0.0)))
+    derived = [ok for c in cases for ok in c.derived_covered.values()]
+    assert sum(derived) >= binomial_floor(len(derived)), [c.derived_covered for c in cases]
+    noise = [c.noise_covered for c in cases]
+    assert sum(noise) >= binomial_floor(len(noise)), noise
+    phi = float(EXPERIMENTS[name].get("noise_phi", 0.0))
+    _bands_hold(cases, phi)
+    # The emulator's band ([predict] method = "emulator") holds on the training periods;
+    # on test days unlike them it is too narrow (method.md section 6, the run warns).
+    _bands_hold(cases, phi, route="emulator", windows=("train",))
 
 
 def test_the_white_model_fails_on_correlated_noise() -> None:
@@ -106,7 +123,22 @@ def test_the_white_model_fails_on_correlated_noise() -> None:
 
 def test_a_sensor_that_averages_keeps_what_it_does_not_alias() -> None:
     cases = results("interval-means")
-    for names in (("k_cb", "cp_fb"), ("R_wall",)):
+    for names in (("k_cb", "cp_fb"), ("R_wall", "U_value")):
         hits = [{**c.covered, **c.derived_covered}[n] for c in cases for n in names]
         assert sum(hits) >= binomial_floor(len(hits)), (names, hits)
     _bands_hold(cases, float(EXPERIMENTS["interval-means"].get("noise_phi", 0.0)))
+
+
+def test_a_discrepancy_in_the_likelihood_absorbs_a_missing_layer() -> None:
+    # The measuring wall has a 15 mm plaster layer the calibrated model lacks; the
+    # white error model with a discrepancy in the likelihood, its band conditioned on
+    # the training residuals. The parameters and the wall's resistance (U) keep their
+    # rates; the areal heat capacity does not (the plaster's mass is not in the model).
+    cases = results("plaster")
+    hits = [ok for c in cases for ok in c.covered.values()]
+    assert sum(hits) >= binomial_floor(len(hits)), [c.covered for c in cases]
+    for name in ("R_wall", "U_value"):
+        derived = [c.derived_covered[name] for c in cases]
+        assert sum(derived) >= binomial_floor(len(derived)), (name, derived)
+    _bands_hold(cases)
+    _bands_hold(cases, route="emulator", windows=("train",))

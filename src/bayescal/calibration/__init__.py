@@ -11,6 +11,8 @@
 * :mod:`~bayescal.calibration.hmc` -- the same in JAX for NUTS;
 * :mod:`~bayescal.calibration.posterior` -- :func:`calibrate` and the
   :class:`Posterior` with its diagnostics;
+* :mod:`~bayescal.calibration.conditional` -- an in-likelihood discrepancy
+  conditioned on the training residuals, for predictions;
 * :mod:`~bayescal.calibration.loo`, :mod:`~bayescal.calibration.cv` and
   :mod:`~bayescal.calibration.heldout` -- leave-one-period-out log predictive
   densities (``bayescal compare``).

@@ -113,7 +113,6 @@ def period_log_densities(
         Least-squares weights of the measured periods ``(m*, p)``. [-]
     """
     names = obs.names()
-    single = obs.n_outputs == 1
     m = obs.y_star.shape[1]
     total = np.zeros(m)
     for q, o in enumerate(obs.outputs):
@@ -122,11 +121,11 @@ def period_log_densities(
         cov = np.zeros((m, o.p, o.p))
         cov[:, np.arange(o.p), np.arange(o.p)] = var[:, bases]
         if o.discrepancy:
-            r = values["delta_rel" if single else f"delta_rel_{o.name}"]
+            r = values[obs.coordinate("delta_rel", q)]
             cov[:, np.arange(o.p), np.arange(o.p)] += r * variances[bases]
         kq, yq = obs.block(q)
         if o.model == "ar1":
-            phi = values["phi" if single else f"phi_{o.name}"]
+            phi = values[obs.coordinate("phi", q)]
             piece = obs.gls(q, phi)
             w_hat = piece.w_hat
             cov += piece.h0_inv / lam

@@ -61,6 +61,20 @@ class _Conditional:
         reduction = np.sum(((a_t * a_t) @ self.inv_den) * (a_x * a_x), axis=1)
         return mean, np.maximum(self.kernel.variance - reduction, 0.0)
 
+    def joint_cov(self, theta_new: FloatArray, x_new: FloatArray) -> FloatArray:
+        """Covariance ``(P, P)`` of the latent weight at one theta and ``P`` periods.
+
+        ``c(z_a, z_b) - c_a^T A^-1 c_b`` with ``z = [theta, x]``: in the
+        eigenbases the reduction is ``a_x diag(sum_k a_t,k^2 / (l_k l_i + a)) a_x^T``.
+        """
+        c_t = self.kernel.theta_cov(theta_new[None, :], self.theta)  # (1, R)
+        a_t = (c_t @ self.q_t)[0]
+        weight = (a_t * a_t) @ self.inv_den  # (m*,)
+        a_x = self.kernel.x_corr(x_new, self.x) @ self.q_x  # (P, m*)
+        prior = float(self.kernel.theta_cov(theta_new[None, :])[0, 0]) * self.kernel.x_corr(x_new)
+        out: FloatArray = prior - (a_x * weight) @ a_x.T
+        return out
+
     def leave_one_run_out(self, v: FloatArray, a: float) -> tuple[FloatArray, FloatArray]:
         """Latent mean and variance ``(R, m*)`` of each run predicted from the others.
 
@@ -302,6 +316,23 @@ class Emulator:
         th, xx = self._pairs(theta_unit, x)
         parts = [c.predict(th, xx) for c in self._cond]
         return np.column_stack([m for m, _ in parts]), np.column_stack([v for _, v in parts])
+
+    def weight_covariance(self, theta_unit: ArrayLike, x: ArrayLike) -> FloatArray:
+        """Joint predictive covariance of the weights over periods at one theta, ``(p, P, P)``.
+
+        Each basis's weights at the normalised parameters ``theta_unit`` ``(t,)`` and
+        the ``P`` periods ``x`` ``(P, s)``, conditional on the training runs
+        (hyperparameters at the MAP); the diagonal is :meth:`predict_weights`'s
+        variance. Bases are independent.
+        """
+        th = np.asarray(theta_unit, dtype=float).reshape(-1)
+        xx = np.atleast_2d(np.asarray(x, dtype=float))
+        if th.size != len(self.parameter_names) or xx.shape[1] != self.x.shape[1]:
+            raise DataError(
+                f"expected theta of {len(self.parameter_names)} values and x with "
+                f"{self.x.shape[1]} columns, got {th.size} and {xx.shape[1]}"
+            )
+        return np.stack([c.joint_cov(th, xx) for c in self._cond])
 
     def predict_std(self, theta_unit: ArrayLike, x: ArrayLike) -> tuple[FloatArray, FloatArray]:
         """Mean and variance of standardised output ``(N, q)`` at normalised inputs."""

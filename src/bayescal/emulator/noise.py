@@ -237,15 +237,19 @@ class ObservationModel:
         return tuple(out)
 
     def names(self) -> tuple[str, ...]:
-        """Coordinate names of the precisions and AR coefficients."""
-        single = self.n_outputs == 1
-        lam = ["lambda_star" if single else f"lambda_star_{o.name}" for o in self.outputs]
-        phi = ["phi" if single else f"phi_{self.outputs[q].name}" for q in self.ar_outputs]
-        rel = [
-            "delta_rel" if single else f"delta_rel_{self.outputs[q].name}"
-            for q in self.delta_outputs
-        ]
+        """Coordinate names of the precisions, AR coefficients and discrepancy variances."""
+        lam = [self.coordinate("lambda_star", q) for q in range(self.n_outputs)]
+        phi = [self.coordinate("phi", q) for q in self.ar_outputs]
+        rel = [self.coordinate("delta_rel", q) for q in self.delta_outputs]
         return (*lam, *phi, *rel)
+
+    def coordinate(self, kind: Literal["lambda_star", "phi", "delta_rel"], q: int) -> str:
+        """Name of output ``q``'s ``lambda*``, AR(1) ``phi`` or discrepancy ``r`` coordinate."""
+        if kind == "phi" and q not in self.ar_outputs:
+            raise ValueError(f"output {self.outputs[q].name!r} has no AR(1) errors")
+        if kind == "delta_rel" and q not in self.delta_outputs:
+            raise ValueError(f"output {self.outputs[q].name!r} has no discrepancy")
+        return kind if self.n_outputs == 1 else f"{kind}_{self.outputs[q].name}"
 
     # ------------------------------------------------------------ white outputs
 
@@ -297,6 +301,32 @@ class ObservationModel:
             logdet_h0=2.0 * float(np.sum(np.log(np.diag(chol[0])))),
             quad0=float(np.sum(resid * resid)),
         )
+
+    def weights_of(self, q: int, y: FloatArray, phi: float = 0.0) -> FloatArray:
+        """The observed-weight estimate of output ``q`` applied to other periods ``y``.
+
+        ``(m', p_o)`` from standardised periods ``y`` ``(n_o, m')``: least squares
+        for white errors, generalised least squares with ``phi`` for AR(1) ones (the
+        same linear map that gives ``w_hat`` of the measurements, so the difference
+        of two such weights is the weights of the difference).
+        """
+        ko = self.block(q)[0]
+        if self.outputs[q].model == "ar1":
+            kz, yz = ar1_whiten(ko, phi), ar1_whiten(y, phi)
+        else:
+            kz, yz = ko, np.asarray(y, dtype=float)
+        w = linalg.solve(kz.T @ kz, kz.T @ yz, assume_a="pos")
+        return np.ascontiguousarray(np.asarray(w, dtype=float).T)
+
+    def noise_block(self, q: int, lam_star: float, phi: float = 0.0) -> FloatArray:
+        """Covariance ``(p_o, p_o)`` of one period's observed-weight errors of output ``q``.
+
+        ``(K_o^T R^-1 K_o)^-1 / lambda*`` (``R = I`` for white errors).
+        """
+        ko = self.block(q)[0]
+        kz = ar1_whiten(ko, phi) if self.outputs[q].model == "ar1" else ko
+        out: FloatArray = np.asarray(np.linalg.inv(kz.T @ kz), dtype=float) / lam_star
+        return out
 
     def remainder(self, q: int, pieces: GlsPieces, lam_star: float) -> float:
         """The remainder of output ``q``'s density summed over the periods (module docstring)."""

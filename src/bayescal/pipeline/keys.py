@@ -22,6 +22,7 @@ import numpy as np
 from bayescal.runner import forcing_fingerprint, simulator_fingerprint
 
 if TYPE_CHECKING:
+    from bayescal.config import Study
     from bayescal.pipeline.stages import Context
 
 __all__ = ["derived_seed", "digest", "stage_keys"]
@@ -66,6 +67,12 @@ def _held_out_key(ctx: Context) -> str:
     return digest(list(outputs.held_out), errors, dict(ctx.measured.held_out))
 
 
+def _likelihood_discrepancy(study: Study) -> bool:
+    """Whether a calibrated output carries a discrepancy in the likelihood."""
+    errors = study.outputs.errors
+    return any(errors[n].discrepancy for n in study.outputs.calibrate if n in errors)
+
+
 def stage_keys(ctx: Context) -> dict[str, str]:
     """The key of every stage for the study as it is now."""
     s = ctx.study
@@ -100,6 +107,9 @@ def stage_keys(ctx: Context) -> dict[str, str]:
         dump["predict"],
         {n: p.nominal for n, p in s.parameters.items()},
         *([_held_out_key(ctx)] if s.outputs.held_out else []),
+        # an in-likelihood discrepancy is conditioned on the training residuals (it added
+        # its prior variance before): the predictions of such a study are computed anew
+        *(["discrepancy conditioned"] if _likelihood_discrepancy(s) else []),
     )
     keys["report"] = digest("report", keys["predict"], s.study.name, s.study.description)
     return keys

@@ -9,7 +9,9 @@ the out-of-basis variance ``1/lambda``), the observation noise of the draw
 (``sd^2 / lambda*_s`` with ``sd`` the output's standardisation scale: with
 "output" standardisation this is the noise SD in the output's unit squared), and,
 for the corrected prediction, the difference process ``Delta(x)`` (its GP mean
-and variance) with theta* from the discrepancy phase. So the band of a
+and variance) with theta* from the discrepancy phase. An output with a
+discrepancy in the likelihood adds that discrepancy conditioned on the training
+residuals at the draw (:func:`conditioned_discrepancy`). So the band of a
 measurement holds parameter uncertainty + emulator uncertainty + noise (+ Delta).
 The prediction line is the mixture's mean.
 
@@ -48,6 +50,7 @@ import numpy as np
 import pandas as pd
 import xarray as xr
 
+from bayescal.calibration.conditional import OutputDiscrepancy
 from bayescal.calibration.posterior import Posterior
 from bayescal.calibration.predictive import mixture_quantiles, quantile_error
 from bayescal.calibration.predictive import pit as predictive_pit
@@ -67,6 +70,7 @@ from bayescal.periods import PeriodLayout
 __all__ = [
     "Band",
     "DiscrepancyModel",
+    "conditioned_discrepancy",
     "metrics_table",
     "predict_band",
     "predictions_dataset",
@@ -224,9 +228,6 @@ def predict_band(
         NaN outside the training periods and the test window.
     """
     theta, lam_stars, pick = _thin(posterior, draws)
-    model_error = {
-        o: v[pick] for o, v in likelihood_delta_variance(emulator, assembled, posterior).items()
-    }
     layout = assembled.layout
     parts = [(assembled.x, layout.train_starts, 0)]
     if layout.test_starts.size:
@@ -242,8 +243,10 @@ def predict_band(
         for name, sl in slices.items():
             _place(layout, starts, mean[:, sl], means[name], begin)
             _place(layout, starts, var[:, sl], variances[name], begin)
-    for name, extra in model_error.items():
-        variances[name] = variances[name] + extra
+    order = list(slices)
+    for name, (mean, var) in conditioned_discrepancy(emulator, assembled, posterior, pick).items():
+        noise = _phase_sd(assembled, name) ** 2 / lam_stars[:, order.index(name), None]
+        means[name], variances[name] = mean, var + noise
     return _mixture_band(means, variances, measured or {}, level)
 
 
@@ -256,48 +259,94 @@ def _phase_sd(assembled: Assembled, name: str) -> np.ndarray:
     return np.asarray(sd[(np.arange(layout.n_total) - anchor) % layout.period])
 
 
-def likelihood_delta_variance(
-    emulator: Emulator, assembled: Assembled, posterior: Posterior
-) -> dict[str, np.ndarray]:
-    """Variance of the in-likelihood discrepancy per draw and sample, in physical units.
+def conditioned_discrepancy(
+    emulator: Emulator,
+    assembled: Assembled,
+    posterior: Posterior,
+    pick: np.ndarray,
+    runs: Mapping[str, np.ndarray] | None = None,
+) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """The in-likelihood discrepancy conditioned on the training residuals, per draw and sample.
 
-    An output declared with ``[outputs.errors.NAME] discrepancy = true`` carries
-    a discrepancy ``GP(0, r tau_j^-1 c_x)`` on each of its basis weights
-    (:class:`~bayescal.emulator.noise.OutputNoise`). A measurement of a new
-    period then differs from the model by ``K delta`` besides the noise, whose
-    variance at sample ``i`` is ``s_i^2 sum_j K_ij^2 r / tau_j`` (``s_i`` the
-    output's standardisation SD). The discrepancy's prior variance is used (it
-    is not conditioned on the training residuals): the band is wider, never
-    narrower, than the conditioned one.
+    An output declared with ``[outputs.errors.NAME] discrepancy = true`` carries a
+    discrepancy ``GP(0, r tau_j^-1 c_x)`` on each of its basis weights. At every
+    posterior draw it is conditioned on that output's measured training periods
+    (:mod:`bayescal.calibration.conditional`: Gaussian conditioning, exact at the
+    draw) and predicted at the training periods and the test window.
+
+    Parameters
+    ----------
+    emulator, assembled
+        The trained emulator and the assembled data.
+    posterior
+        The calibration posterior (its draws carry ``r``); a posterior without
+        them (the difference-process phase) gives an empty result.
+    pick
+        Indices of the draws used, in the flattened draws ``(S,)``.
+    runs
+        Output name -> the simulator at those draws ``(S, n_total)``
+        (``method = "simulator"``: the model is known at theta*, only the
+        discrepancy is kriged); ``None``: the emulator is the model, and eta and
+        the discrepancy are conditioned together.
 
     Returns
     -------
     dict
-        Output name -> ``(S, n_total)`` for the posterior's ``S`` draws (flattened
-        over chains), only for outputs with such a discrepancy; empty for draws
-        without its ``r`` (those of the difference-process phase).
+        Output name -> ``(mean, variance)``, ``(S, n_total)`` each, NaN outside
+        the training periods and the test window, physical units. With
+        ``runs``: the discrepancy's conditioned mean and variance, to add to the
+        runs. Without: the whole model + discrepancy part, the mean of the
+        output and its variance without the observation noise (with the
+        out-of-basis ``1 / lambda``).
     """
     obs = assembled.observations
-    names = obs.names()
-    rel_names = names[len(names) - len(obs.delta_outputs) :]
-    if not obs.delta_outputs or not set(rel_names) <= set(posterior.aux_names):
-        # none, or draws without them (the difference-process phase, whose own
-        # Delta takes the discrepancy's place in the corrected prediction)
+    if not obs.delta_outputs or not set(obs.names()) <= set(posterior.aux_names):
         return {}
-    aux = np.asarray(posterior.aux, dtype=float).reshape(-1, len(posterior.aux_names))
-    variances = np.array([k.variance for k in emulator.kernels])
-    k = np.asarray(emulator.basis.k, dtype=float)
     layout = assembled.layout
-    anchor = int(layout.test_starts[0]) if layout.test_starts.size else int(layout.train_starts[0])
-    phase = (np.arange(layout.n_total) - anchor) % layout.period
+    t = len(posterior.names)
+    unit = posterior.unit_draws.reshape(-1, t)[pick]
+    aux = np.asarray(posterior.aux, dtype=float).reshape(-1, len(posterior.aux_names))[pick]
+    parts = [(assembled.x, layout.train_starts, 0)]
+    if layout.test_starts.size:
+        parts.append((assembled.x_test, layout.test_starts, layout.test_begin))
+    x_new = np.vstack([x for x, _, _ in parts])
+    m = assembled.n_periods
+    x_all = np.vstack([assembled.x, x_new])
     out = {}
-    for q, rel_name in zip(obs.delta_outputs, rel_names, strict=True):
-        name = obs.outputs[q].name
-        bases = list(obs.outputs[q].bases)
-        sl = assembled.outputs.slices[name]
-        per_row = (k[sl][:, bases] ** 2) @ variances[bases] * assembled.outputs.sd[sl] ** 2
-        r = aux[:, posterior.aux_names.index(rel_name)]
-        out[name] = r[:, None] * per_row[phase][None, :]
+    for q in obs.delta_outputs:
+        noise = obs.outputs[q]
+        name, bases = noise.name, list(noise.bases)
+        st = assembled.outputs.standardisations[q]
+        ko = obs.block(q)[0]
+        field = OutputDiscrepancy.build(emulator, obs, q, x_new)
+        mean = np.full((pick.size, layout.n_total), np.nan)
+        var = np.full((pick.size, layout.n_total), np.nan)
+        for s in range(pick.size):
+            values = dict(zip(posterior.aux_names, aux[s], strict=True))
+            phi = float(values[obs.coordinate("phi", q)]) if q in obs.ar_outputs else 0.0
+            if runs is not None:
+                y_sim = (layout.cut(np.asarray(runs[name][s], float)) - st.mean[:, None]) / st.sd[
+                    :, None
+                ]
+                shift, cov = field.condition(values, obs.weights_of(q, y_sim, phi))
+                w_new, extra = shift, 0.0
+                offset = np.zeros(ko.shape[0])
+            else:
+                theta = np.broadcast_to(unit[s], (x_all.shape[0], t))
+                w_all = emulator.predict_weights(theta, x_all)[0][:, bases]
+                eta = emulator.weight_covariance(unit[s], x_all)[bases]
+                shift, cov = field.condition(values, w_all[:m], eta)
+                w_new, extra = w_all[m:] + shift, 1.0 / emulator.lam
+                offset = st.mean
+            mu = offset[:, None] + st.sd[:, None] * (ko @ w_new.T)  # (n_o, P)
+            v = st.sd[:, None] ** 2 * (np.einsum("nj,ajk,nk->na", ko, cov, ko) + extra)
+            at = 0
+            for _, starts, begin in parts:
+                cols = slice(at, at + len(starts))
+                _place(layout, starts, mu[:, cols], mean[s], begin)
+                _place(layout, starts, v[:, cols], var[s], begin)
+                at += len(starts)
+        out[name] = (mean, var)
     return out
 
 
@@ -309,7 +358,7 @@ def simulator_band(
     level: float = 0.95,
     discrepancy: DiscrepancyModel | None = None,
     measured: Mapping[str, np.ndarray] | None = None,
-    model_error: Mapping[str, np.ndarray] | None = None,
+    model_error: Mapping[str, tuple[np.ndarray, np.ndarray]] | None = None,
 ) -> Band:
     """Calibrated prediction from simulator runs at posterior draws, with its bands.
 
@@ -329,8 +378,9 @@ def simulator_band(
     measured
         Output name -> measured series ``(n_total,)`` for the PIT (optional).
     model_error
-        Output name -> variance ``(S, n_total)`` of an in-likelihood discrepancy
-        at the same draws (:func:`likelihood_delta_variance`), added to the noise.
+        Output name -> mean and variance ``(S, n_total)`` of an in-likelihood
+        discrepancy at the same draws, conditioned on the training residuals
+        (:func:`conditioned_discrepancy` with ``runs``), added to the runs.
 
     Returns
     -------
@@ -356,7 +406,8 @@ def simulator_band(
         var = _phase_sd(assembled, name) ** 2 / column[:, None]
         mean = np.asarray(sims, dtype=float)
         if model_error and name in model_error:
-            var = var + model_error[name]
+            mean = mean + model_error[name][0]
+            var = var + model_error[name][1]
         if delta_mean is not None and delta_var is not None:
             mean = mean + delta_mean[name][None]
             var = var + delta_var[name][None]

@@ -38,9 +38,9 @@ from bayescal.errors import ConfigError, SimulatorError
 from bayescal.pipeline.keys import derived_seed
 from bayescal.pipeline.predict import (
     Band,
+    conditioned_discrepancy,
     delta_series,
     held_out_band,
-    likelihood_delta_variance,
     merge_bands,
     metrics_table,
     predict_band,
@@ -440,15 +440,17 @@ def _band(
     # emulator + Delta RMSE 2.25 W/m², simulator + Delta see docs/case-studies.md).
     if section.method == "simulator":
         runs, lam_star, drawn = posterior_runs(ctx, posterior, section.runs)
-        model_error = likelihood_delta_variance(em.emulator, em.assembled, posterior)
+        model_runs = {o: runs[o] for o in em.emulator.outputs.names}
         band = simulator_band(
             em.assembled,
-            {o: runs[o] for o in em.emulator.outputs.names},
+            model_runs,
             lam_star,
             level=section.level,
             discrepancy=discrepancy,
             measured=measured,
-            model_error={o: v[drawn] for o, v in model_error.items()},
+            model_error=conditioned_discrepancy(
+                em.emulator, em.assembled, posterior, drawn, model_runs
+            ),
         )
         held = ctx.study.outputs.held_out
         if discrepancy is not None or not held:

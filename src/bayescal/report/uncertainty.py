@@ -25,11 +25,18 @@ from bayescal.report.figures import save_figure
 
 __all__ = ["BAND_TEXT", "plot_correlation", "plot_pit", "uncertainty_section"]
 
+NOISE_TEXT = (
+    "The noise SD is learnt from what the output basis leaves of the measurements: the "
+    "sensor's noise and the part of the measured signal that no model run represents in "
+    "that basis (on the exact virtual wall of the tests about 10 % above the injected noise). "
+    "Read it as an upper estimate of the sensor's noise."
+)
 BAND_TEXT = (
     "A band is the central interval of the predictive distribution of a measurement: "
     "the model's prediction at each posterior draw of θ* (parameter uncertainty), the "
     "emulator's own interpolation uncertainty (emulator predictions), the measurement "
-    "noise of that draw (its error model), and, for the corrected prediction, the "
+    "noise of that draw (its error model), an output's in-likelihood discrepancy "
+    "conditioned on the training residuals, and, for the corrected prediction, the "
     "difference process Δ. Its edges are quantiles of that mixture computed exactly, not "
     "percentiles of a few random realisations; the Monte Carlo error below comes from the "
     "finite number of posterior draws. The test window was used for nothing but these "
@@ -119,6 +126,7 @@ def uncertainty_section(
             )
         header = ["output", "error model", "noise SD", "95 % interval", "band edge MC error"]
         parts.append(table(header, rows))
+        parts.append(f'<p class="note">{escape(NOISE_TEXT)}</p>')
     ident = identifiability(posterior)
     items = "".join(f"<li>{escape(line)}</li>" for line in ident.lines())
     parts.append(

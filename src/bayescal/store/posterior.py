@@ -99,7 +99,10 @@ def variable_attributes(posterior: Posterior) -> dict[str, tuple[str, str]]:
     out = {name: (prior.unit, prior.description) for name, prior in posterior.priors.items()}
     out |= {name: (DIMENSIONLESS, _aux_description(name)) for name in posterior.aux_names}
     for o in posterior.noise:
-        text = f"standard deviation of the measurement error of {o.name}"
+        text = (
+            f"standard deviation of the measurement error of {o.name}: the sensor's noise "
+            "and the part of the measurement the output basis cannot represent"
+        )
         out[_noise_name(posterior, o.name)] = (o.unit, text)
     out |= {name: (d.unit, d.description) for name, d in posterior.derived.items()}
     out[LOG_DENSITY] = ("", "log posterior density (up to a constant) at the draw")

@@ -1,0 +1,199 @@
+"""The in-likelihood discrepancy conditioned on the training residuals (predictions).
+
+An output declared with ``[outputs.errors.NAME] discrepancy = true`` is measured
+as (method.md section 4a, standardised units, weights of the output's ``p_o``
+basis vectors, one row per period)
+
+    w_hat*_i = eta(theta*, x_i) + delta(x_i) + e_i,
+    delta_j ~ GP(0, r tau_j^-1 c_x),   e_i ~ N(0, N),
+
+with ``N`` the observed weights' noise block (white: ``(K_o^T K_o)^-1 /
+lambda*``; AR(1): ``H0^-1 / lambda*``), the bases independent a priori and
+periods independent in the noise. At one posterior draw (theta*, lambda*, phi,
+r) everything is Gaussian, so the prediction of ``z = eta + delta`` at any
+period, given the training periods' measured weights, is ordinary Gaussian
+conditioning:
+
+    mean(z_a) = m_a + G[a, O] Sigma^-1 (w_hat* - m_O),
+    cov(z_a)  = G[a, a] - G[a, O] Sigma^-1 G[O, a],
+    Sigma     = blockdiag_j G_j[O, O] + N (x) I,
+
+where ``G_j = E_j + r tau_j^-1 C_x`` is the covariance of basis ``j`` of ``z``
+over the training periods ``O`` and the predicted ones before the measurements
+are seen, and ``m`` its mean. Two routes give ``m`` and ``E``:
+
+* **simulator** (``[predict] method = "simulator"``): eta at theta*_s is the
+  simulator re-run there, known exactly: ``m`` = the run's weights, ``E = 0``;
+  only delta is kriged;
+* **emulator**: ``m`` and ``E`` are the emulator's predictive mean and joint
+  covariance at theta*_s over the periods (:meth:`Emulator.weight_covariance`),
+  so eta and delta are conditioned on the measurements together, as in Kennedy
+  and O'Hagan's predictive distribution (the emulator's own conditioning on
+  the simulator runs is already in ``m`` and ``E``).
+
+Each output is conditioned on its own measurements: given theta*, the bases of
+different outputs are independent (block-diagonal basis, independent GPs,
+independent noise). The conditioned discrepancy is what the training periods
+taught about the model's error; on a test period whose conditions ``x`` lie
+far from every training period it reverts to its prior (mean 0, variance ``r
+tau^-1``), on one like a training period it carries that period's residual over.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy import linalg
+
+from bayescal.emulator.gp import Emulator
+from bayescal.emulator.noise import ObservationModel
+
+__all__ = ["OutputDiscrepancy", "krige_observed"]
+
+FloatArray = NDArray[np.float64]
+
+
+def krige_observed(
+    resid: FloatArray, prior: FloatArray, noise: FloatArray
+) -> tuple[FloatArray, FloatArray]:
+    """Condition independent per-basis Gaussian fields on noisy observations of them.
+
+    Parameters
+    ----------
+    resid
+        Observed minus prior mean at the ``m`` observed periods ``(m, p)``. [-]
+    prior
+        Covariance of each basis's field before the observations, ``(p, M, M)``
+        over ``M = m + P`` periods: the ``m`` observed ones first, then the
+        ``P`` to predict. [-]
+    noise
+        Covariance ``(p, p)`` of one observed period's errors (the same for
+        every period, independent between periods). [-]
+
+    Returns
+    -------
+    mean, cov
+        The field at the ``P`` predicted periods given the observations: the
+        shift of its mean ``(P, p)`` and its covariance within each period
+        ``(P, p, p)``. [-]
+    """
+    m, p = resid.shape
+    if prior.shape[0] != p or prior.shape[1] != prior.shape[2] or prior.shape[1] < m:
+        raise ValueError(f"prior {prior.shape} does not fit residuals {resid.shape}")
+    if noise.shape != (p, p):
+        raise ValueError(f"noise block {noise.shape} does not fit {p} bases")
+    n_new = prior.shape[1] - m
+    sigma = np.kron(noise, np.eye(m))  # rows basis-major: basis j, period i -> j m + i
+    cross = np.zeros((p * m, n_new, p))
+    for j in range(p):
+        rows = slice(j * m, (j + 1) * m)
+        sigma[rows, rows] += prior[j, :m, :m]
+        cross[rows, :, j] = prior[j, :m, m:]
+    chol = linalg.cholesky(sigma, lower=True, check_finite=False)
+    alpha = linalg.cho_solve((chol, True), resid.T.reshape(-1), check_finite=False)
+    mean = np.einsum("ial,i->al", cross, alpha)
+    half = linalg.solve_triangular(
+        chol, cross.reshape(p * m, n_new * p), lower=True, check_finite=False
+    ).reshape(p * m, n_new, p)
+    diag = np.stack([np.diagonal(prior[j])[m:] for j in range(p)], axis=1)  # (P, p)
+    cov = -np.einsum("iak,ial->akl", half, half)
+    cov[:, np.arange(p), np.arange(p)] += diag
+    return mean, cov
+
+
+@dataclass(frozen=True)
+class OutputDiscrepancy:
+    """The discrepancy of one output, ready to be conditioned draw by draw.
+
+    Attributes
+    ----------
+    observations
+        The error models and the measured training periods.
+    q
+        The output's index in ``observations``.
+    x_corr
+        ``c_x`` of each of its bases over the training periods, then the
+        predicted ones, ``(p_o, M, M)``. [-]
+    variances
+        ``1 / tau_j`` of its bases ``(p_o,)``. [-]
+    """
+
+    observations: ObservationModel
+    q: int
+    x_corr: FloatArray
+    variances: FloatArray
+
+    @classmethod
+    def build(
+        cls, emulator: Emulator, observations: ObservationModel, q: int, x_new: FloatArray
+    ) -> OutputDiscrepancy:
+        """Output ``q`` of ``observations`` (which must carry a discrepancy) at ``x_new``.
+
+        Parameters
+        ----------
+        emulator
+            The trained emulator (its correlation over ``x`` and ``1 / tau``).
+        observations
+            Error models and measured training periods (their ``x`` is ``emulator.x``).
+        q
+            Output index.
+        x_new
+            Normalised conditions of the periods to predict ``(P, s)``. [-]
+        """
+        if q not in observations.delta_outputs:
+            raise ValueError(f"output {observations.outputs[q].name!r} has no discrepancy")
+        bases = list(observations.outputs[q].bases)
+        x_all = np.vstack([emulator.x, np.atleast_2d(x_new)])
+        kernels = emulator.kernels
+        return cls(
+            observations,
+            q,
+            np.stack([kernels[j].x_corr(x_all) for j in bases]),
+            np.array([kernels[j].variance for j in bases]),
+        )
+
+    @property
+    def n_train(self) -> int:
+        """Training periods ``m*``."""
+        return int(self.observations.y_star.shape[1])
+
+    def condition(
+        self,
+        values: Mapping[str, float],
+        model: FloatArray,
+        eta_cov: FloatArray | None = None,
+    ) -> tuple[FloatArray, FloatArray]:
+        """Shift and covariance of the predicted weights at one posterior draw.
+
+        Parameters
+        ----------
+        values
+            The draw's ``lambda*``, ``phi`` and ``r`` coordinates by name.
+        model
+            The model's weights at the draw's theta* on the training periods
+            ``(m*, p_o)``: the simulator run's (estimated like the measured
+            ones, :meth:`ObservationModel.weights_of`) or the emulator's mean. [-]
+        eta_cov
+            The emulator's joint covariance of the weights over the training and
+            predicted periods ``(p_o, M, M)`` (emulator route); ``None`` when the
+            model is the simulator itself. [-]
+
+        Returns
+        -------
+        shift, cov
+            Added to the model's weights at the predicted periods ``(P, p_o)``,
+            and the covariance of the (model + discrepancy) weights there
+            ``(P, p_o, p_o)``. [-]
+        """
+        obs, q = self.observations, self.q
+        lam = float(values[obs.coordinate("lambda_star", q)])
+        phi = float(values[obs.coordinate("phi", q)]) if q in obs.ar_outputs else 0.0
+        r = float(values[obs.coordinate("delta_rel", q)])
+        measured = obs.weights_of(q, obs.block(q)[1], phi)
+        prior = (r * self.variances)[:, None, None] * self.x_corr
+        if eta_cov is not None:
+            prior = prior + eta_cov
+        return krige_observed(measured - model, prior, obs.noise_block(q, lam, phi))
