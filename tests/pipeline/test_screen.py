@@ -125,6 +125,23 @@ def test_flags_are_added_where_missing(tmp_path: Path) -> None:
         set_screen_flags(path, {"c": True})
 
 
+def test_a_study_file_that_cannot_be_written_is_said_in_one_line(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    path = tmp_path / "study.toml"
+    text = "[parameters.a]\nunit = '1'\n"
+    path.write_text(text, encoding="utf-8")
+
+    def refuse(target: Path, content: str) -> None:
+        raise PermissionError(13, "Permission denied", str(target))
+
+    monkeypatch.setattr("bayescal.config.edit.atomic_write_text", refuse)
+    with pytest.raises(ConfigError, match="cannot write the screen flags") as info:
+        set_screen_flags(path, {"a": True})
+    assert "\n" not in str(info.value)
+    assert path.read_text(encoding="utf-8") == text  # nothing lost
+
+
 def test_statistics() -> None:
     sim = np.array([[1.0, 2.0, 3.0], [2.0, 2.0, 2.0]])
     obs = np.array([1.0, np.nan, 1.0])

@@ -101,6 +101,14 @@ def set_screen_flags(path: Path, flags: Mapping[str, bool]) -> list[str]:
         raise ConfigError(f"could not set screen on {wrong}; edit {path.name} by hand")
     changed = [n for n, flag in flags.items() if bool(before[n].get("screen", False)) != flag]
     if changed:
-        atomic_write_text(path.with_name(path.name + BACKUP_SUFFIX), text)
-        atomic_write_text(path, edited)
+        try:
+            atomic_write_text(path.with_name(path.name + BACKUP_SUFFIX), text)
+            atomic_write_text(path, edited)
+        except OSError as exc:  # a read-only study folder, a full disk
+            raise ConfigError(
+                f"cannot write the screen flags into {path} ({exc.strerror or exc})",
+                hint="make the study folder writable and run bayescal screen --apply again "
+                "(the screening's results are kept), or set the flags by hand",
+                source=str(path),
+            ) from exc
     return changed
