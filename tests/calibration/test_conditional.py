@@ -37,6 +37,19 @@ def _condition(cov: np.ndarray, observed: np.ndarray, values: np.ndarray, target
     return gain @ values, cov[np.ix_(tgt, tgt)] - gain @ c_to.T
 
 
+def _assert_same(
+    mean: np.ndarray, cov: np.ndarray, ref_mean: np.ndarray, ref_cov: np.ndarray
+) -> None:
+    """Means ``(P, p)`` and per-period covariances ``(P, p, p)`` against the dense
+    ``(P p,)`` mean and ``(P p, P p)`` covariance (period-major), to ~1e-10."""
+    p = mean.shape[1]
+    ref_mean = ref_mean.reshape(-1, p)
+    np.testing.assert_allclose(mean, ref_mean, rtol=0, atol=REL * np.abs(ref_mean).max())
+    for a in range(mean.shape[0]):
+        ref = ref_cov[a * p : (a + 1) * p, a * p : (a + 1) * p]
+        np.testing.assert_allclose(cov[a], ref, rtol=0, atol=REL * np.abs(ref).max())
+
+
 def _model(em: Emulator, rng: np.random.Generator, error: str) -> ObservationModel:
     k = np.asarray(em.basis.k, dtype=float)
     noise = OutputNoise("heat_flux_in", (0, k.shape[0]), tuple(range(k.shape[1])), error,  # type: ignore[arg-type]
@@ -98,7 +111,6 @@ def test_emulator_route_equals_dense_conditioning_on_runs_and_samples(
     full = np.zeros((dim, dim))
     ys = slice(p * n_sim, p * n_sim + n * m)
     zs = slice(p * n_sim + n * m, dim)
-    lat = np.zeros((dim, 0))
     blocks = []
     for j, kern in enumerate(em.kernels):
         # latent f_j + delta_j over the training and new periods (M of them)
@@ -111,7 +123,6 @@ def test_emulator_route_equals_dense_conditioning_on_runs_and_samples(
         to_z = np.zeros((p * x_new.shape[0], x_all.shape[0]))
         to_z[np.arange(x_new.shape[0]) * p + j, m + np.arange(x_new.shape[0])] = 1.0
         blocks.append((rows, c_zz, c_sz, to_y, to_z))
-    del lat
     for rows, c_zz, c_sz, to_y, to_z in blocks:
         full[rows, ys] = c_sz @ to_y.T
         full[rows, zs] = c_sz @ to_z.T
@@ -124,11 +135,7 @@ def test_emulator_route_equals_dense_conditioning_on_runs_and_samples(
     observed[: p * n_sim + n * m] = True
     data = np.concatenate([em.w[:, j] for j in range(p)] + [obs.y_star.T.reshape(-1)])
     ref_mean, ref_cov = _condition(full, observed, data, zs)
-    ref_mean = ref_mean.reshape(x_new.shape[0], p)
-    np.testing.assert_allclose(got_mean, ref_mean, rtol=0, atol=REL * np.abs(ref_mean).max())
-    for a in range(x_new.shape[0]):
-        ref = ref_cov[a * p : (a + 1) * p, a * p : (a + 1) * p]
-        np.testing.assert_allclose(cov[a], ref, rtol=0, atol=REL * np.abs(ref).max())
+    _assert_same(got_mean, cov, ref_mean, ref_cov)
     # conditioning moved something (the test can fail)
     assert np.abs(shift).max() > 1e-3
 
@@ -170,12 +177,9 @@ def test_simulator_route_equals_dense_kriging_of_the_sample_residuals(
     c_yy = to_y @ c_delta @ to_y.T + np.kron(np.eye(m), _ar1_corr(n, phi) / lam_star)
     c_zy = to_z @ c_delta @ to_y.T
     resid = (obs.y_star - y_sim).T.reshape(-1)
-    ref_mean = (c_zy @ np.linalg.solve(c_yy, resid)).reshape(n_new, p)
+    ref_mean = c_zy @ np.linalg.solve(c_yy, resid)
     ref_cov = to_z @ c_delta @ to_z.T - c_zy @ np.linalg.solve(c_yy, c_zy.T)
-    np.testing.assert_allclose(shift, ref_mean, rtol=0, atol=REL * np.abs(ref_mean).max())
-    for a in range(n_new):
-        ref = ref_cov[a * p : (a + 1) * p, a * p : (a + 1) * p]
-        np.testing.assert_allclose(cov[a], ref, rtol=0, atol=REL * np.abs(ref).max())
+    _assert_same(shift, cov, ref_mean, ref_cov)
     # far from every training period the discrepancy is back at its prior
     far = OutputDiscrepancy.build(em, obs, 0, np.full((1, em.x.shape[1]), 50.0))
     shift_far, cov_far = far.condition(values, obs.weights_of(0, y_sim, phi))
