@@ -12,9 +12,11 @@ days, 4 test days, 30 runs, 4 x (1000 + 1000) draws) and checks
   with fewer samples (2 truths, a quick check by hand) the range widens to 3.5
   binomial standard errors of the effective number of samples (AR(1) errors:
   ``n (1 - phi) / (1 + phi)``);
-* the noise SD's 95 % interval covers what it estimates (the injected noise and
-  the noise-free signal's part outside the basis, ``coverage.effective_noise_sd``)
-  and the derived quantities' intervals theirs, at the binomial rate;
+* the noise SD's 95 % interval covers what it estimates with white errors (the
+  injected noise and the noise-free signal's part outside the basis,
+  ``coverage.effective_noise_sd``) at the binomial rate, and with AR(1) errors
+  reaches at least the injected noise's SD (an upper estimate); the derived
+  quantities' intervals (each on its own) cover theirs at the binomial rate;
 * the emulator route's band ([predict] method = "emulator") on the training
   periods (on test days unlike them it is too narrow: method.md section 6).
 
@@ -52,7 +54,7 @@ import pytest
 from scipy import stats
 
 from coverage import CaseResult, run_case
-from virtual_wall import plastered_wall
+from virtual_wall import NOISE_VARIANCE, plastered_wall
 
 N_TRUTHS = int(os.environ.get("BAYESCAL_VALIDATION_TRUTHS", "2"))
 EXPERIMENTS = {
@@ -75,6 +77,7 @@ def results(name: str) -> tuple[CaseResult, ...]:
             for seed, c in enumerate(cases):
                 row = {"experiment": name, "seed": seed, "covered": c.covered}
                 row |= {"derived": c.derived_covered, "noise": c.noise_covered}
+                row |= {"noise_interval": c.noise_interval}
                 row |= {"band95": c.band95, "band50": c.band50, "samples": c.samples}
                 row |= {"emulator95": c.emulator95, "emulator50": c.emulator50}
                 f.write(json.dumps(row) + "\n")
@@ -123,10 +126,16 @@ def test_intervals_and_bands_cover_at_their_rates(name: str) -> None:
     cases = results(name)
     hits = [ok for c in cases for ok in c.covered.values()]
     assert sum(hits) >= binomial_floor(len(hits)), [c.covered for c in cases]
-    derived = [ok for c in cases for ok in c.derived_covered.values()]
-    assert sum(derived) >= binomial_floor(len(derived)), [c.derived_covered for c in cases]
-    noise = [c.noise_covered for c in cases]
-    assert sum(noise) >= binomial_floor(len(noise)), noise
+    # each derived quantity on its own: R and U follow k_cb almost exactly, so pooling
+    # them would count one miss three times
+    for quantity in cases[0].derived_covered:
+        derived = [c.derived_covered[quantity] for c in cases]
+        assert sum(derived) >= binomial_floor(len(derived)), (quantity, derived)
+    if name == "white":  # the noise SD's interval covers what it estimates
+        noise = [c.noise_covered for c in cases]
+    else:  # AR(1): an upper estimate of the sensor's noise (method.md section 4a)
+        noise = [c.noise_interval[1] >= math.sqrt(NOISE_VARIANCE) for c in cases]
+    assert sum(noise) >= binomial_floor(len(noise)), [c.noise_interval for c in cases]
     phi = float(EXPERIMENTS[name].get("noise_phi", 0.0))
     _bands_hold(cases, phi)
     # The emulator's band ([predict] method = "emulator") holds on the training periods;
