@@ -145,6 +145,11 @@ def test_cli_show_and_errors(first: tuple[Path, Results], tmp_path: Path) -> Non
     assert re.search(r"k_cb\s+0\.12", shown.output)
     assert "max_abs_error is the paper's 'MAE'" in shown.output
     assert "The test window is read only for these final metrics" in shown.output
+    # identifiability: principal directions, contraction and the correlation matrix
+    assert "what the data fix" in shown.output
+    assert "prior-to-posterior contraction" in shown.output
+    assert re.search(r"posterior correlation.*\n\s+k_cb\s+cp_cb", shown.output)
+    assert re.search(r"k_cb\s+\+1\.00", shown.output)
     empty = _study(tmp_path)
     result = runner.invoke(main, ["show", str(empty)])
     assert result.exit_code == 2

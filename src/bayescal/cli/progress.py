@@ -170,6 +170,13 @@ def describe(res: Results) -> str:
             f"{n} {100 * c:.0f} %" for n, c in zip(ident.names, ident.contraction, strict=True)
         )
         lines.append(f"  prior-to-posterior contraction: {contraction}")
+        if len(ident.names) > 1:
+            import pandas as pd
+
+            corr = pd.DataFrame(ident.correlation, index=ident.names, columns=ident.names)
+            lines += ["  posterior correlation (log scale for positive parameters):"]
+            text = corr.to_string(float_format="{:+.2f}".format)
+            lines += [f"    {row}" for row in text.split("\n")]
         if res.posterior.warnings:
             lines += ["", "diagnostics: NOT all passed"]
             lines += [f"  warning: {w}" for w in res.posterior.warnings]
