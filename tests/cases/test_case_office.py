@@ -63,6 +63,8 @@ def _shrink(text: str) -> str:
         name = header[1] if header else ""
         if name.startswith("parameters.") and name.split(".", 1)[1] not in KEEP:
             continue
+        if name.startswith("outputs.errors.") and name.rsplit(".", 1)[1] not in OUTPUTS:
+            continue
         if name in SMALL:
             block = f"[{name}]\n{SMALL[name]}\n"
         if name == "data":
