@@ -57,6 +57,12 @@ def _model(em: Emulator, rng: np.random.Generator, error: str) -> ObservationMod
     return ObservationModel((noise,), k, rng.normal(size=(k.shape[0], em.x.shape[0])))
 
 
+def _problem(em: Emulator, seed: int, error: str) -> tuple[np.random.Generator, ObservationModel]:
+    """A generator and an observation model of random data on the emulator's periods."""
+    rng = np.random.default_rng(seed)
+    return rng, _model(em, rng, error)
+
+
 def test_emulator_weight_covariance_is_the_dense_gp_conditional(
     small_wall: tuple[Any, Any, Emulator],
 ) -> None:
@@ -85,11 +91,8 @@ def test_emulator_route_equals_dense_conditioning_on_runs_and_samples(
     # z = eta(theta*, x) + delta(x) at training and new periods, given the runs'
     # weights W and every measured sample y* = K (eta + delta) + e.
     _, _, em = small_wall
-    rng = np.random.default_rng(11)
-    obs = _model(em, rng, error)
-    k = obs.k
-    n, p = k.shape
-    m = em.x.shape[0]
+    rng, obs = _problem(em, 11, error)
+    k, (n, p), m = obs.k, obs.k.shape, em.x.shape[0]
     theta = rng.random(em.theta.shape[1])
     x_new = rng.random((2, em.x.shape[1]))
     x_all = np.vstack([em.x, x_new])
@@ -146,11 +149,8 @@ def test_simulator_route_equals_dense_kriging_of_the_sample_residuals(
 ) -> None:
     # y* - y_sim = K delta + e with the simulator's output known exactly at theta*.
     _, _, em = small_wall
-    rng = np.random.default_rng(5)
-    obs = _model(em, rng, error)
-    k = obs.k
-    n, p = k.shape
-    m = em.x.shape[0]
+    rng, obs = _problem(em, 5, error)
+    k, (n, p), m = obs.k, obs.k.shape, em.x.shape[0]
     x_new = np.vstack([em.x[:2], rng.random((3, em.x.shape[1]))])
     x_all = np.vstack([em.x, x_new])
     y_sim = rng.normal(size=(n, m))
