@@ -205,10 +205,11 @@ def _finish_grouped(
     for idx, _, _ in groups:
         free[idx] = False
     if free.any():
-        schur = variance[free, None] * grid.l_x[free] + a_star[free, None] - g[free]
-        resid = grid.obs_rot[free] - u[free]
-        logdet += positive_log_sum(schur, "observed-block Schur complement")
-        quad += float(np.vdot(resid, resid / schur))
+        part = _diagonal_schur(
+            variance[free], grid.l_x[free], a_star[free], g[free], grid.obs_rot[free] - u[free]
+        )
+        logdet += part[0]
+        quad += part[1]
     for idx, noise, overlap in groups:
         q, m = len(idx), grid.l_x.shape[1]
         mat = (noise[:, None, :, None] * overlap).reshape(q * m, q * m)
@@ -276,15 +277,28 @@ def _finish(
 ) -> LogDensity:
     """Add the observed block's Schur complement (diagonal in the rotated basis)."""
     variance = grid.variance if delta is None else grid.variance + delta
-    schur = variance[:, None] * grid.l_x
+    logdet, quad = _diagonal_schur(variance, grid.l_x, a_star, g, grid.obs_rot - u)
+    logdet += sum(sim.logdet for sim in sims)
+    quad += sum(sim.quad for sim in sims)
+    size = sum(sim.h.size for sim in sims) + grid.obs_rot.size
+    return LogDensity.from_pieces(logdet, quad, size)
+
+
+def _diagonal_schur(
+    variance: FloatArray, l_x: FloatArray, a_star: FloatArray, g: FloatArray, resid: FloatArray
+) -> tuple[float, float]:
+    """Log-determinant and quadratic form of bases whose Schur complement is diagonal.
+
+    In the rotated bases (full grid, white noise) basis ``j``'s observed block is
+    ``(tau_j^-1 + delta_j) l_x,j + a*_j - g_j``; ``resid`` is ``z_j - u_j``.
+    """
+    schur = variance[:, None] * l_x
     schur += a_star[:, None]
     schur -= g
-    resid = grid.obs_rot - u
-    logdet = sum(sim.logdet for sim in sims)
-    logdet += positive_log_sum(schur, "observed-block Schur complement")
-    quad = sum(sim.quad for sim in sims) + float(np.vdot(resid, resid / schur))
-    size = sum(sim.h.size for sim in sims) + schur.size
-    return LogDensity.from_pieces(logdet, quad, size)
+    return (
+        positive_log_sum(schur, "observed-block Schur complement"),
+        float(np.vdot(resid, resid / schur)),
+    )
 
 
 class KronCalibrationDensity:

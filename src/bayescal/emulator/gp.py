@@ -12,6 +12,7 @@ simulator's out-of-basis part, eq. 3) times ``sd^2``.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -317,13 +318,16 @@ class Emulator:
         parts = [c.predict(th, xx) for c in self._cond]
         return np.column_stack([m for m, _ in parts]), np.column_stack([v for _, v in parts])
 
-    def weight_covariance(self, theta_unit: ArrayLike, x: ArrayLike) -> FloatArray:
+    def weight_covariance(
+        self, theta_unit: ArrayLike, x: ArrayLike, bases: Sequence[int] | None = None
+    ) -> FloatArray:
         """Joint predictive covariance of the weights over periods at one theta, ``(p, P, P)``.
 
         Each basis's weights at the normalised parameters ``theta_unit`` ``(t,)`` and
         the ``P`` periods ``x`` ``(P, s)``, conditional on the training runs
         (hyperparameters at the MAP); the diagonal is :meth:`predict_weights`'s
-        variance. Bases are independent.
+        variance. Bases are independent; ``bases`` picks some of them (all if
+        ``None``), in that order.
         """
         th = np.asarray(theta_unit, dtype=float).reshape(-1)
         xx = np.atleast_2d(np.asarray(x, dtype=float))
@@ -332,7 +336,8 @@ class Emulator:
                 f"expected theta of {len(self.parameter_names)} values and x with "
                 f"{self.x.shape[1]} columns, got {th.size} and {xx.shape[1]}"
             )
-        return np.stack([c.joint_cov(th, xx) for c in self._cond])
+        picked = range(len(self._cond)) if bases is None else bases
+        return np.stack([self._cond[j].joint_cov(th, xx) for j in picked])
 
     def predict_std(self, theta_unit: ArrayLike, x: ArrayLike) -> tuple[FloatArray, FloatArray]:
         """Mean and variance of standardised output ``(N, q)`` at normalised inputs."""

@@ -310,11 +310,8 @@ class ObservationModel:
         same linear map that gives ``w_hat`` of the measurements, so the difference
         of two such weights is the weights of the difference).
         """
-        ko = self.block(q)[0]
-        if self.outputs[q].model == "ar1":
-            kz, yz = ar1_whiten(ko, phi), ar1_whiten(y, phi)
-        else:
-            kz, yz = ko, np.asarray(y, dtype=float)
+        kz = self._whitened_basis(q, phi)
+        yz = ar1_whiten(y, phi) if self.outputs[q].model == "ar1" else np.asarray(y, dtype=float)
         w = linalg.solve(kz.T @ kz, kz.T @ yz, assume_a="pos")
         return np.ascontiguousarray(np.asarray(w, dtype=float).T)
 
@@ -323,10 +320,14 @@ class ObservationModel:
 
         ``(K_o^T R^-1 K_o)^-1 / lambda*`` (``R = I`` for white errors).
         """
-        ko = self.block(q)[0]
-        kz = ar1_whiten(ko, phi) if self.outputs[q].model == "ar1" else ko
+        kz = self._whitened_basis(q, phi)
         out: FloatArray = np.asarray(np.linalg.inv(kz.T @ kz), dtype=float) / lam_star
         return out
+
+    def _whitened_basis(self, q: int, phi: float) -> FloatArray:
+        """``K_o`` of output ``q``, prewhitened with ``phi`` for AR(1) errors."""
+        ko = self.block(q)[0]
+        return ar1_whiten(ko, phi) if self.outputs[q].model == "ar1" else ko
 
     def remainder(self, q: int, pieces: GlsPieces, lam_star: float) -> float:
         """The remainder of output ``q``'s density summed over the periods (module docstring)."""

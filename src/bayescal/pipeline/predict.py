@@ -229,9 +229,7 @@ def predict_band(
     """
     theta, lam_stars, pick = _thin(posterior, draws)
     layout = assembled.layout
-    parts = [(assembled.x, layout.train_starts, 0)]
-    if layout.test_starts.size:
-        parts.append((assembled.x_test, layout.test_starts, layout.test_begin))
+    parts = _predicted_parts(assembled)
     slices = emulator.outputs.slices
     s = theta.shape[0]
     means = {n: np.full((s, layout.n_total), np.nan) for n in slices}
@@ -306,9 +304,7 @@ def conditioned_discrepancy(
     t = len(posterior.names)
     unit = posterior.unit_draws.reshape(-1, t)[pick]
     aux = np.asarray(posterior.aux, dtype=float).reshape(-1, len(posterior.aux_names))[pick]
-    parts = [(assembled.x, layout.train_starts, 0)]
-    if layout.test_starts.size:
-        parts.append((assembled.x_test, layout.test_starts, layout.test_begin))
+    parts = _predicted_parts(assembled)
     x_new = np.vstack([x for x, _, _ in parts])
     m = assembled.n_periods
     x_all = np.vstack([assembled.x, x_new])
@@ -334,7 +330,7 @@ def conditioned_discrepancy(
             else:
                 theta = np.broadcast_to(unit[s], (x_all.shape[0], t))
                 w_all = emulator.predict_weights(theta, x_all)[0][:, bases]
-                eta = emulator.weight_covariance(unit[s], x_all)[bases]
+                eta = emulator.weight_covariance(unit[s], x_all, bases)
                 shift, cov = field.condition(values, w_all[:m], eta)
                 w_new, extra = w_all[m:] + shift, 1.0 / emulator.lam
                 offset = st.mean
@@ -475,9 +471,7 @@ def delta_series(
     layout = assembled.layout
     out = {n: np.full(layout.n_total, np.nan) for n in names}
     slices = dict(zip(names, _slices(assembled), strict=True))
-    parts = [(assembled.x, layout.train_starts, 0)]
-    if layout.test_starts.size:
-        parts.append((assembled.x_test, layout.test_starts, layout.test_begin))
+    parts = _predicted_parts(assembled)
     for x, starts, begin in parts:
         if len(starts):
             mean, var = discrepancy.predict(x)
@@ -485,6 +479,15 @@ def delta_series(
             for name, sl in slices.items():
                 _place(layout, starts, values[sl], out[name], begin)
     return out
+
+
+def _predicted_parts(assembled: Assembled) -> list[tuple[np.ndarray, np.ndarray, int]]:
+    """``(x, period starts, first sample)`` of the training periods and of the test window."""
+    layout = assembled.layout
+    parts = [(assembled.x, layout.train_starts, 0)]
+    if layout.test_starts.size:
+        parts.append((assembled.x_test, layout.test_starts, layout.test_begin))
+    return parts
 
 
 def _slices(assembled: Assembled) -> list[slice]:
