@@ -22,7 +22,12 @@ from bayescal.emulator.assemble import Assembled, NoiseSpec, assemble
 from bayescal.emulator.gp import Emulator
 from bayescal.emulator.noise import ErrorModel, ObservationModel
 from bayescal.emulator.training import train
-from bayescal.pipeline.predict import conditioned_discrepancy, predict_band, simulator_band
+from bayescal.pipeline.predict import (
+    conditioned_discrepancy,
+    predict_band,
+    simulator_band,
+    simulator_noise,
+)
 from bayescal.simulators.wall import MultilayerWall
 from virtual_wall import (
     NOISE_VARIANCE,
@@ -73,12 +78,13 @@ def band_coverage(
 ) -> dict[str, dict[str, tuple[float, float]]]:  # fmt: skip
     """Per output and window, the shares of measured samples inside the 95 % and
     50 % bands built from simulator ``runs`` at the posterior draws ``pick``: the
-    band ``bayescal run`` prints with ``[predict] method = "simulator"`` (with an
-    in-likelihood discrepancy conditioned on the training residuals, which needs
-    the ``emulator``)."""
-    lam = post.lam_stars.reshape(-1, post.lam_stars.shape[-1])
+    band ``bayescal run`` prints with ``[predict] method = "simulator"`` (the noise
+    estimated again from the runs' training residuals; with an in-likelihood
+    discrepancy, conditioned on the training residuals, which needs the
+    ``emulator``)."""
+    lam = simulator_noise(a, runs, post, pick)
     error = {} if emulator is None else conditioned_discrepancy(emulator, a, post, pick, runs)
-    band = simulator_band(a, runs, lam[pick], measured=measured, model_error=error)
+    band = simulator_band(a, runs, lam, measured=measured, model_error=error)
     out: dict[str, dict[str, tuple[float, float]]] = {}
     for name, y_all in measured.items():
         out[name] = {}

@@ -9,7 +9,9 @@ changes meant and stated in the release notes; the discrepancy key and those
 after it changed again with the difference-process sampler
 (``[discrepancy] max_samples``: lockstep whitened chains extended until they
 converge, whose draws differ from the old random walk's, so old results must
-not be reused). A change of a key makes every
+not be reused); the predict key and the report's changed with ``[predict] noise``
+(the simulator route's noise estimated from the runs' training residuals, so
+bands computed before are recomputed). A change of a key makes every
 existing output folder recompute that stage and all later ones; if a change is
 meant, say so in the release notes and update the pins.
 """
@@ -30,8 +32,8 @@ WALL_KEYS = {
     "emulator": "64db760bda8e3e331f4b3b8a876ef5aebb80316a6adc975b8cedd60066bda342",
     "calibrate": "fa0b4481aebc35d7b5b9c062436a00b06420bb92f428cb1ca537b2f3a55a11d1",
     "discrepancy": "c74a5337fa82f3296b8ab70225785109199f8d84b8da3193018d021672ba809d",
-    "predict": "41fbfe0d588bfda8c1ddbc8f3ce2161f20e4cdeb791f90f6c1ca264c7ecf9484",
-    "report": "507f30e191dafe7d0d430e24047e578dfbb06b40df9838d9d510792fc37cfefc",
+    "predict": "8c4bfce13e04ec936273e56dc354f328c4202a82b9f30cf34799ce87333ed036",
+    "report": "37ba132640c26fe5f1dcec7b6296b1ecc4528be13004d9db38d916d79bf8c127",
 }
 
 

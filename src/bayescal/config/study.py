@@ -287,6 +287,17 @@ class PredictSection(Section):
         default=50,
         ge=10,
     )
+    noise: Literal["simulator", "calibration"] = field_doc(
+        "Observation noise in the bands of method = 'simulator': 'simulator' (the default) "
+        "estimates each output's noise again at every draw from the re-run simulator's "
+        "residuals on the training periods (its posterior mean given them; the "
+        "calibration's lambda* also holds the emulator's own error, which a re-run "
+        "simulator does not make, and its bands over-covered where the emulator was the "
+        "weak link); 'calibration' uses the draw's lambda*. Outputs with a discrepancy, "
+        "and the corrected prediction, always use lambda*.",
+        "calibration",
+        default="simulator",
+    )
 
 
 class RunnerSection(Section):

@@ -46,6 +46,7 @@ from bayescal.pipeline.predict import (
     predict_band,
     predictions_dataset,
     simulator_band,
+    simulator_noise,
 )
 from bayescal.runner import Progress, RunResults, run_design
 from bayescal.simulators.base import Derivable, Simulator
@@ -441,6 +442,8 @@ def _band(
     if section.method == "simulator":
         runs, lam_star, drawn = posterior_runs(ctx, posterior, section.runs)
         model_runs = {o: runs[o] for o in em.emulator.outputs.names}
+        if discrepancy is None and section.noise == "simulator":
+            lam_star = simulator_noise(em.assembled, model_runs, posterior, drawn)
         band = simulator_band(
             em.assembled,
             model_runs,
