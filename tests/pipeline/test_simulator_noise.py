@@ -20,7 +20,7 @@ from scipy import stats
 from bayescal.calibration.posterior import Posterior
 from bayescal.emulator.assemble import Assembled, NoiseSpec, assemble
 from bayescal.emulator.noise import ErrorModel
-from bayescal.pipeline.predict import simulator_band, simulator_noise
+from bayescal.pipeline.predict import predictions_dataset, simulator_band, simulator_noise
 from virtual_wall import NOISE_VARIANCE, PRIORS, simulate, virtual_experiment
 
 DRAWS = 12
@@ -144,3 +144,18 @@ def test_bands_cover_the_test_window_at_their_rates_on_a_known_truth() -> None:
     # the calibration's lambda* (emulator error included) over-covers: the failure fixed
     k, n = inflated[0.5]
     assert k > stats.binom.interval(0.998, n, 0.5)[1]
+
+
+def test_the_bands_noise_is_stated_in_the_outputs_unit() -> None:
+    a, measured, truth_run, truth = _experiment("white", 0.0)
+    post = _posterior_at_truth(a, truth, 0.0)
+    runs = {"heat_flux_in": np.tile(truth_run, (DRAWS, 1))}
+    lam = simulator_noise(a, runs, post, np.arange(DRAWS))
+    band = simulator_band(a, runs, lam, measured={"heat_flux_in": measured})
+    want = float(np.median(a.observations.outputs[0].scale / np.sqrt(lam[:, 0])))
+    assert band.noise_sd["heat_flux_in"] == pytest.approx(want, rel=1e-12)
+    times = np.arange(a.layout.n_total).astype("datetime64[h]")
+    ds = predictions_dataset(
+        times, a.layout, {"heat_flux_in": measured}, {"heat_flux_in": truth_run}, band, {}
+    )
+    assert ds.attrs["heat_flux_in_calibrated_noise_sd"] == pytest.approx(want, rel=1e-12)

@@ -157,10 +157,15 @@ def describe(res: Results) -> str:
         for o in res.posterior.noise:
             sd = sds[o.name].reshape(-1)
             low, high = np.percentile(sd, [2.5, 97.5])
-            lines.append(
+            line = (
                 f"measurement noise of {o.name} ({o.model}): SD {np.mean(sd):.4g} {o.unit} "
                 f"[{low:.4g}, {high:.4g}]"
             )
+            attrs = res.predictions.dataset.attrs if res.predictions is not None else {}
+            if f"{o.name}_calibrated_noise_sd" in attrs:
+                in_band = float(attrs[f"{o.name}_calibrated_noise_sd"])
+                line += f"; in the bands (from the re-run simulator) {in_band:.4g} {o.unit}"
+            lines.append(line)
         from bayescal.calibration.identifiability import identifiability
 
         ident = identifiability(res.posterior)

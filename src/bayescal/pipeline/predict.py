@@ -7,7 +7,8 @@ theta*_s (the emulator's mean, or the simulator re-run at theta*_s), the
 emulator's own interpolation variance (emulator predictions only; it includes
 the out-of-basis variance ``1/lambda``), the observation noise of the draw
 (``sd^2 / lambda*_s`` with ``sd`` the output's standardisation scale: with
-"output" standardisation this is the noise SD in the output's unit squared), and,
+"output" standardisation this is the noise SD in the output's unit squared; on
+the simulator route estimated again from the runs, see below), and,
 for the corrected prediction, the difference process ``Delta(x)`` (its GP mean
 and variance) with theta* from the discrepancy phase. An output with a
 discrepancy in the likelihood adds that discrepancy conditioned on the training
@@ -46,7 +47,7 @@ shown for orientation only.
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, Literal, Protocol
 
 import numpy as np
@@ -99,7 +100,9 @@ class Band:
     ``lower``/``upper`` bound the outer band (``level``, 95 % by default),
     ``lower50``/``upper50`` the 50 % band; ``pit`` is ``F(y_measured)`` (NaN
     where not measured or not predicted); ``mc_error`` the median Monte Carlo
-    standard error of the outer band's edges as a fraction of its width.
+    standard error of the outer band's edges as a fraction of its width;
+    ``noise_sd`` the observation noise SD the band holds (median over draws
+    and samples, in the output's unit; simulator route only).
     """
 
     mean: dict[str, np.ndarray]
@@ -110,6 +113,7 @@ class Band:
     pit: dict[str, np.ndarray] = field(default_factory=dict)
     mc_error: dict[str, float] = field(default_factory=dict)
     level: float = 0.95
+    noise_sd: dict[str, float] = field(default_factory=dict)
 
 
 def _mixture_band(
@@ -454,10 +458,11 @@ def simulator_band(
     lam = np.asarray(lam_stars, dtype=float)
     lam = lam[:, None] if lam.ndim == 1 else lam
     order = list(assembled.outputs.names)
-    means, variances = {}, {}
+    means, variances, noise_sd = {}, {}, {}
     for name, sims in runs.items():
         column = lam[:, order.index(name) if lam.shape[1] > 1 else 0]
         var = _phase_sd(assembled, name) ** 2 / column[:, None]
+        noise_sd[name] = float(np.median(np.sqrt(var[:, covered])))
         mean = np.asarray(sims, dtype=float)
         if model_error and name in model_error:
             mean = mean + model_error[name][0]
@@ -467,7 +472,8 @@ def simulator_band(
             var = var + delta_var[name][None]
         means[name] = np.where(covered, mean, np.nan)
         variances[name] = np.where(covered, var, np.nan)
-    return _mixture_band(means, variances, measured or {}, level)
+    band = _mixture_band(means, variances, measured or {}, level)
+    return replace(band, noise_sd=noise_sd)
 
 
 def held_out_band(
@@ -515,6 +521,7 @@ def merge_bands(first: Band, second: Band) -> Band:
         first.pit | second.pit,
         first.mc_error | second.mc_error,
         first.level,
+        first.noise_sd | second.noise_sd,
     )
 
 
@@ -628,6 +635,8 @@ def predictions_dataset(
         if band is not None:
             for o, error in band.mc_error.items():
                 meta[f"{o}_{name}_mc_error"] = error
+            for o, sd in band.noise_sd.items():
+                meta[f"{o}_{name}_noise_sd"] = sd
     return xr.Dataset(data, coords=coords, attrs=meta | dict(attrs or {}))
 
 

@@ -35,7 +35,9 @@ BAND_TEXT = (
     "A band is the central interval of the predictive distribution of a measurement: "
     "the model's prediction at each posterior draw of θ* (parameter uncertainty), the "
     "emulator's own interpolation uncertainty (emulator predictions), the measurement "
-    "noise of that draw (its error model), an output's in-likelihood discrepancy "
+    "noise of that draw (its error model; when the simulator is re-run for the bands, "
+    "estimated again from the runs' residuals on the training periods, because the noise "
+    "SD below also holds the emulator's own error), an output's in-likelihood discrepancy "
     "conditioned on the training residuals, and, for the corrected prediction, the "
     "difference process Δ. Its edges are quantiles of that mixture computed exactly, not "
     "percentiles of a few random realisations; the Monte Carlo error below comes from the "
@@ -115,16 +117,25 @@ def uncertainty_section(
             sd = sds[o.name].reshape(-1)
             low, high = np.percentile(sd, [2.5, 97.5])
             error = ds.attrs.get(f"{o.name}_calibrated_mc_error", float("nan"))
+            in_band = ds.attrs.get(f"{o.name}_calibrated_noise_sd")
             rows.append(
                 [
                     o.name,
                     o.model + (" + discrepancy" if o.discrepancy else ""),
                     f"{np.mean(sd):.4g} {o.unit}",
                     f"[{low:.4g}, {high:.4g}]",
+                    "–" if in_band is None else f"{float(in_band):.4g} {o.unit}",
                     f"{100 * float(error):.2g} %",
                 ]
             )
-        header = ["output", "error model", "noise SD", "95 % interval", "band edge MC error"]
+        header = [
+            "output",
+            "error model",
+            "noise SD",
+            "95 % interval",
+            "noise SD in the bands",
+            "band edge MC error",
+        ]
         parts.append(table(header, rows))
         parts.append(f'<p class="note">{escape(NOISE_TEXT)}</p>')
     ident = identifiability(posterior)
