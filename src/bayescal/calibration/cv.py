@@ -222,6 +222,14 @@ class PeriodScores:
         """``m*``."""
         return int(self.psis.size)
 
+    def shifted(self, per_period: ArrayLike) -> PeriodScores:
+        """The scores with a log-Jacobian per period ``(m*,)`` added (relative errors:
+        densities of ``log(y + floor)`` made densities of ``y``)."""
+        add = np.asarray(per_period, dtype=float)
+        return dataclasses.replace(
+            self, psis=self.psis + add, lppd=self.lppd + add, refit=self.refit + add
+        )
+
     @property
     def pointwise(self) -> FloatArray:
         """``elpd_i``: the refit where there is one, else the PSIS estimate ``(m*,)``."""

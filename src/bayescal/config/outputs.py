@@ -54,6 +54,24 @@ class OutputError(Section):
         default=False,
     )
 
+    relative: bool = field_doc(
+        "Errors proportional to the level, as a meter's ('within 3 %'): the output is "
+        "calibrated on log(value + floor), so its noise SD, its sd and its bands are "
+        "relative (sd is then a fraction, 0.03 or '3 %'). The band of an hour with little "
+        "gas is then narrower than that of a morning with a lot. Choose it by "
+        "cross-validation on the training periods: bayescal compare ranks it against "
+        "absolute errors in the measurements' own units.",
+        True,
+        default=False,
+    )
+    floor: Spread | None = field_doc(
+        "With relative errors: the level below which the error stops shrinking (a meter's "
+        "resolution, a sensor's offset), in the output's unit or text with a unit. Default: "
+        "1 % of the mean measured value of the training periods.",
+        "0.1 kWh",
+        default=None,
+    )
+
     @field_validator("sd")
     @classmethod
     def _sd_shape(cls, value: Any) -> Any:
@@ -89,15 +107,31 @@ class OutputsSection(Section):
     )
 
     def calibration_dump(self) -> dict[str, Any]:
-        """The section without the held-out outputs (what the emulator and calibration read)."""
+        """The section without the held-out outputs (what the emulator and calibration read).
+
+        ``relative`` and ``floor`` enter only where set, so that the stage keys of
+        studies written before they existed stay what they were.
+        """
         return {
             "calibrate": list(self.calibrate),
             "errors": {
-                name: spec.model_dump(mode="json")
+                name: _error_dump(spec)
                 for name, spec in self.errors.items()
                 if name not in self.held_out
             },
         }
+
+    def relative(self, name: str) -> bool:
+        """Whether output ``name`` has errors proportional to its level."""
+        spec = self.errors.get(name)
+        return spec is not None and spec.relative
+
+    def floor(self, name: str) -> float | None:
+        """The stated floor of a relative output in its internal unit (``None``: default)."""
+        spec = self.errors.get(name)
+        if spec is None or spec.floor is None:
+            return None
+        return _spread(spec.floor, name, "floor")
 
     def noise_sd(self, name: str) -> float | tuple[float, float] | None:
         """The stated accuracy of output ``name`` in its internal unit (``None`` if not given).
@@ -111,12 +145,34 @@ class OutputsSection(Section):
         if spec is None or spec.sd is None:
             return None
         values = spec.sd if isinstance(spec.sd, list) else [spec.sd]
-        out = [_spread(v, name) for v in values]
+        read = _fraction if spec.relative else _spread
+        out = [read(v, name) for v in values]
         return out[0] if len(out) == 1 else (out[0], out[1])
 
 
-def _spread(value: Spread, name: str) -> float:
-    """One noise SD in the internal unit of output ``name``."""
+def _error_dump(spec: OutputError) -> dict[str, Any]:
+    dumped = spec.model_dump(mode="json")
+    for key in ("relative", "floor"):
+        if dumped[key] == OutputError.model_fields[key].default:
+            del dumped[key]
+    return dumped
+
+
+def _fraction(value: Spread, name: str, what: str = "sd") -> float:
+    """A relative noise SD: a number (0.03) or a percentage ('3 %')."""
+    text = str(value).strip()
+    try:
+        number = float(text[:-1]) / 100.0 if text.endswith("%") else float(text)
+    except ValueError:
+        raise ConfigError(
+            f"outputs.errors.{name}.{what}: {value!r} is not a fraction; with relative = true "
+            "the noise SD is a fraction of the level, e.g. 0.03 or '3 %'"
+        ) from None
+    return number
+
+
+def _spread(value: Spread, name: str, what: str = "sd") -> float:
+    """One noise SD (or floor) in the internal unit of output ``name``."""
     if not isinstance(value, str):
         return float(value)
     parts = value.split(maxsplit=1)
@@ -131,6 +187,6 @@ def _spread(value: Spread, name: str) -> float:
     except (ValueError, DataError) as exc:
         detail = exc.one_line() if isinstance(exc, DataError) else "not a number"
         raise ConfigError(
-            f"outputs.errors.{name}.sd: {value!r} is not '<number> <unit>' ({detail})",
+            f"outputs.errors.{name}.{what}: {value!r} is not '<number> <unit>' ({detail})",
             hint="write e.g. sd = '0.1 W/m2' or a plain number in the output's unit",
         ) from None

@@ -598,6 +598,7 @@ def _output_problems(study: Study) -> list[str]:
             study.outputs.noise_sd(name)
         except ConfigError as exc:
             problems.append(str(exc.message))
+        problems += _relative_problems(study, name)
     if study.calibration.sampler == "nuts" and (
         len(study.outputs.calibrate) > 1
         or any(e.model != "white" for e in study.outputs.errors.values())
@@ -606,6 +607,34 @@ def _output_problems(study: Study) -> list[str]:
             "calibration.sampler: 'nuts' samples one output with white errors; use 'mwg' "
             "for several outputs or AR(1) errors"
         )
+    return problems
+
+
+def _relative_problems(study: Study, name: str) -> list[str]:
+    """What ``relative = true`` (errors proportional to the level) allows."""
+    spec = study.outputs.errors[name]
+    where = f"outputs.errors.{name}"
+    if not spec.relative:
+        if spec.floor is not None:
+            return [f"{where}.floor is for relative errors; add relative = true or remove it"]
+        return []
+    problems = []
+    if name in study.outputs.held_out:
+        problems.append(
+            f"{where}: relative errors apply to calibrated outputs; a held-out sensor's "
+            "band uses its sd in the output's unit"
+        )
+    if study.discrepancy.enabled:
+        problems.append(
+            f"{where}: relative errors do not combine with the difference-process phase "
+            "([discrepancy] enabled); use discrepancy = true in this table instead"
+        )
+    try:
+        floor = study.outputs.floor(name)
+    except ConfigError as exc:
+        return [*problems, str(exc.message)]
+    if floor is not None and not floor > 0.0:
+        problems.append(f"{where}.floor must be > 0, got {spec.floor!r}")
     return problems
 
 

@@ -78,11 +78,16 @@ class NoiseSpec:
     discrepancy
         Whether to add a model discrepancy over the periods' conditions
         (:class:`~bayescal.emulator.noise.OutputNoise`).
+    relative
+        Whether the output's values are ``log(y + floor)``
+        (:class:`~bayescal.emulator.noise.LogLevel`, applied by the caller):
+        its noise SD and ``sd`` are then fractions of the level.
     """
 
     model: ErrorModel = "white"
     sd: float | tuple[float, float] | None = None
     discrepancy: bool = False
+    relative: bool = False
 
 
 @dataclass(frozen=True)
@@ -413,7 +418,7 @@ def _observations(
             DEFAULT_NOISE_PRIOR if spec.sd is None else noise_prior_from_sd(spec.sd, scale, name)
         )
         bases = tuple(j for j, g in enumerate(basis.groups) if g == q)
-        unit = GLOSSARY[name].unit if name in GLOSSARY else ""
+        unit = "relative" if spec.relative else GLOSSARY[name].unit if name in GLOSSARY else ""
         outputs.append(
             OutputNoise(
                 name, (sl.start, sl.stop), bases, spec.model, prior, scale, unit, spec.discrepancy

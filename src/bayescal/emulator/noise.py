@@ -53,6 +53,7 @@ __all__ = [
     "DEFAULT_NOISE_PRIOR",
     "ErrorModel",
     "GlsPieces",
+    "LogLevel",
     "ObservationModel",
     "OutputNoise",
     "ar1_whiten",
@@ -71,6 +72,68 @@ PHI_MAX = 0.999
 #: Range of the relative variance ``r`` of a model discrepancy (log-uniform prior):
 #: from negligible to as large as the emulator's prior variance of a weight.
 DELTA_RANGE = (1e-4, 1.0)
+
+
+@dataclass(frozen=True)
+class LogLevel:
+    """Errors proportional to the level: an output calibrated on ``z = log(y + floor)``.
+
+    A meter accurate to 3 % has an error SD of 3 % of what it reads; on
+    ``z`` that error is additive with SD ~0.03 whatever the level, which is
+    what the error models of this module assume. ``floor`` (> 0, the output's
+    unit) keeps zero readings finite and is the level below which the error
+    stops shrinking. Bands computed on ``z`` map back exactly (quantiles
+    commute with a monotone map); a Gaussian on ``z`` has the mean
+    ``exp(mu + v/2) - floor`` on ``y``. Densities of ``y`` are those of ``z``
+    plus the log-Jacobian ``-sum log(y + floor)`` (:meth:`log_jacobian`), so
+    that variants with and without relative errors compare in the
+    measurements' own units.
+    """
+
+    floor: float
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.floor) and self.floor > 0.0):
+            raise ConfigError(f"the floor of relative errors must be > 0, got {self.floor!r}")
+
+    def forward(self, y: ArrayLike, what: str = "values") -> FloatArray:
+        """``log(y + floor)``; NaN stays NaN.
+
+        Raises
+        ------
+        DataError
+            Where ``y + floor <= 0`` (relative errors need a non-negative level).
+        """
+        arr = np.asarray(y, dtype=float)
+        shifted = arr + self.floor
+        bad = np.isfinite(shifted) & ~(shifted > 0.0)
+        if bad.any():
+            low = float(arr[bad].min())
+            raise DataError(
+                f"{what}: relative errors need values above -floor ({-self.floor:.6g}), "
+                f"found {low:.6g}",
+                hint="relative errors suit non-negative outputs (meters); use absolute "
+                "errors here, or raise [outputs.errors.NAME] floor",
+            )
+        with np.errstate(invalid="ignore"):
+            out: FloatArray = np.log(shifted)
+        return out
+
+    def inverse(self, z: ArrayLike) -> FloatArray:
+        """``exp(z) - floor``."""
+        out: FloatArray = np.exp(np.asarray(z, dtype=float)) - self.floor
+        return out
+
+    def mean(self, mu: ArrayLike, var: ArrayLike) -> FloatArray:
+        """Mean on ``y`` of a Gaussian ``N(mu, var)`` on ``z``."""
+        m = np.asarray(mu, dtype=float)
+        out: FloatArray = np.exp(m + 0.5 * np.asarray(var, dtype=float)) - self.floor
+        return out
+
+    def log_jacobian(self, y: ArrayLike) -> FloatArray:
+        """``log |dz/dy| = -log(y + floor)`` per value (added to a density of ``z``)."""
+        out: FloatArray = -np.log(np.asarray(y, dtype=float) + self.floor)
+        return out
 
 
 def ar1_whiten(y: FloatArray, phi: float) -> FloatArray:

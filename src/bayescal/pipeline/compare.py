@@ -11,7 +11,8 @@ discrepancy on or off, another standardisation). :func:`compare`
    already in its output folder (:func:`bayescal.pipeline.run`);
 3. scores every training period left out in turn
    (:mod:`bayescal.calibration.cv`: PSIS with Pareto-smoothed weights, in the
-   measurements' own units), and refits the calibration without the period
+   measurements' own units; outputs with relative errors add the log-Jacobian
+   of their log map, :func:`relative_jacobian`), and refits the calibration without the period
    for those whose Pareto ``k`` exceeds 0.7, worst first, at most
    ``max_refits`` per variant; the scores are kept in each study's output
    folder (:mod:`bayescal.store.crossval`) and reused by a later comparison;
@@ -127,6 +128,8 @@ def _settings(study: Study) -> dict[str, str]:
         text = f"{name} {spec.model}"
         if spec.discrepancy:
             text += "+discrepancy"
+        if spec.relative:
+            text += " relative"
         if spec.sd is not None:
             text += f" sd {spec.sd}"
         errors.append(text)
@@ -267,7 +270,22 @@ def _score(
             close()
         scores = scores.with_refits({i: value}, _refit_note(i, refit.diagnostics))
         crossval_store.save_scores(scores, path, key)
-    return scores
+    return scores.shifted(relative_jacobian(ctx))
+
+
+def relative_jacobian(ctx: Context) -> np.ndarray:
+    """Per training period ``(m*,)``: the log-Jacobian of the outputs with relative errors.
+
+    Their scores are densities of ``log(y + floor)``; adding ``-sum log(y + floor)``
+    over a period's samples makes them densities of the measurements in their own
+    units, comparable with a variant's absolute errors (zero without relative errors).
+    """
+    layout = ctx.measured.layout
+    out = np.zeros(layout.m_star)
+    for name, level in ctx.transforms.items():
+        train = layout.cut(np.asarray(ctx.measured.outputs[name], dtype=float))
+        out += level.log_jacobian(train).sum(axis=0)
+    return out
 
 
 def _refit_note(period: int, diag: Diagnostics) -> list[str]:

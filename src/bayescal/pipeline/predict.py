@@ -60,6 +60,7 @@ from bayescal.calibration.predictive import mixture_quantiles, quantile_error
 from bayescal.calibration.predictive import pit as predictive_pit
 from bayescal.emulator.assemble import Assembled
 from bayescal.emulator.gp import Emulator
+from bayescal.emulator.noise import LogLevel
 from bayescal.glossary import GLOSSARY
 from bayescal.metrics import (
     KEY_COLUMNS,
@@ -121,12 +122,21 @@ def _mixture_band(
     variances: Mapping[str, np.ndarray],
     measured: Mapping[str, np.ndarray],
     level: float,
+    transforms: Mapping[str, LogLevel] | None = None,
 ) -> Band:
-    """The band of the mixtures ``(S, n_total)`` per output (NaN where not predicted)."""
+    """The band of the mixtures ``(S, n_total)`` per output (NaN where not predicted).
+
+    An output in ``transforms`` (relative errors) has its mixture on the log
+    scale: the edges map back exactly, the mean is the mixture's mean on the
+    output's own scale, the PIT is unchanged and the Monte Carlo error is that
+    of the edges on the log scale as a fraction of the band's width there.
+    ``measured`` is on the output's own scale.
+    """
     tail = 0.5 * (1.0 - level)
     band = Band({}, {}, {}, level=level)
     for name, mean in means.items():
         var = variances[name]
+        level_map = (transforms or {}).get(name)
         ok = np.all(np.isfinite(mean), axis=0) & np.all(np.isfinite(var), axis=0)
         series = {k: np.full(mean.shape[1], np.nan) for k in ("m", "lo", "hi", "lo50", "hi50")}
         pit = np.full(mean.shape[1], np.nan)
@@ -134,15 +144,20 @@ def _mixture_band(
         if ok.any():
             mu, v = mean[:, ok], var[:, ok]
             q = mixture_quantiles(mu, v, [tail, 0.25, 0.75, 1.0 - tail])
-            series["m"][ok] = mu.mean(axis=0)
-            for k, row in zip(("lo", "lo50", "hi50", "hi"), q, strict=True):
-                series[k][ok] = row
             width = np.maximum(q[3] - q[0], np.finfo(float).tiny)
             edge = np.maximum(quantile_error(mu, v, q[0]), quantile_error(mu, v, q[3]))
             error = float(np.median(edge / width))
+            if level_map is None:
+                series["m"][ok] = mu.mean(axis=0)
+            else:
+                series["m"][ok] = level_map.mean(mu, v).mean(axis=0)
+                q = level_map.inverse(q)
+            for k, row in zip(("lo", "lo50", "hi50", "hi"), q, strict=True):
+                series[k][ok] = row
             obs = np.asarray(measured[name], dtype=float) if name in measured else None
             if obs is not None:
-                pit[ok] = predictive_pit(mu, v, obs[ok])
+                seen = obs[ok] if level_map is None else level_map.forward(obs[ok], name)
+                pit[ok] = predictive_pit(mu, v, seen)
         band.mean[name], band.lower[name], band.upper[name] = (
             series["m"],
             series["lo"],
@@ -212,6 +227,7 @@ def predict_band(
     level: float = 0.95,
     discrepancy: DiscrepancyModel | None = None,
     measured: Mapping[str, np.ndarray] | None = None,
+    transforms: Mapping[str, LogLevel] | None = None,
 ) -> Band:
     """Calibrated prediction of every output over the record, with its bands.
 
@@ -229,6 +245,9 @@ def predict_band(
         A fitted difference process to add (``None``: the model alone).
     measured
         Output name -> measured series ``(n_total,)`` for the PIT (optional).
+    transforms
+        Outputs with relative errors -> their log map (the emulator's values
+        are on that scale; the band is returned on the output's own).
 
     Returns
     -------
@@ -253,7 +272,7 @@ def predict_band(
     for name, (mean, var) in conditioned_discrepancy(emulator, assembled, posterior, pick).items():
         noise = _phase_sd(assembled, name) ** 2 / lam_stars[:, order.index(name), None]
         means[name], variances[name] = mean, var + noise
-    return _mixture_band(means, variances, measured or {}, level)
+    return _mixture_band(means, variances, measured or {}, level, transforms)
 
 
 def _phase_sd(assembled: Assembled, name: str) -> np.ndarray:
@@ -417,6 +436,7 @@ def simulator_band(
     discrepancy: DiscrepancyModel | None = None,
     measured: Mapping[str, np.ndarray] | None = None,
     model_error: Mapping[str, tuple[np.ndarray, np.ndarray]] | None = None,
+    transforms: Mapping[str, LogLevel] | None = None,
 ) -> Band:
     """Calibrated prediction from simulator runs at posterior draws, with its bands.
 
@@ -439,6 +459,9 @@ def simulator_band(
         Output name -> mean and variance ``(S, n_total)`` of an in-likelihood
         discrepancy at the same draws, conditioned on the training residuals
         (:func:`conditioned_discrepancy` with ``runs``), added to the runs.
+    transforms
+        Outputs with relative errors -> their log map: their ``runs`` are on
+        that scale, and the band is returned on the output's own.
 
     Returns
     -------
@@ -472,7 +495,7 @@ def simulator_band(
             var = var + delta_var[name][None]
         means[name] = np.where(covered, mean, np.nan)
         variances[name] = np.where(covered, var, np.nan)
-    band = _mixture_band(means, variances, measured or {}, level)
+    band = _mixture_band(means, variances, measured or {}, level, transforms)
     return replace(band, noise_sd=noise_sd)
 
 

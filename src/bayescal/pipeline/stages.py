@@ -17,7 +17,7 @@ the simulation runner's per-run cache.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -33,6 +33,7 @@ from bayescal.data.measured import MeasuredData, load_measured
 from bayescal.design import Design, Prior, latin_hypercube
 from bayescal.emulator.assemble import Assembled, NoiseSpec, assemble
 from bayescal.emulator.gp import Emulator, LooResult
+from bayescal.emulator.noise import LogLevel
 from bayescal.emulator.training import train
 from bayescal.errors import ConfigError, SimulatorError
 from bayescal.pipeline.keys import derived_seed
@@ -47,6 +48,7 @@ from bayescal.pipeline.predict import (
     predictions_dataset,
     simulator_band,
     simulator_noise,
+    windows,
 )
 from bayescal.runner import Progress, RunResults, run_design
 from bayescal.simulators.base import Derivable, Simulator
@@ -121,6 +123,24 @@ class Context:
         """The study's priors, in parameter order."""
         return self.study.priors()
 
+    @property
+    def transforms(self) -> dict[str, LogLevel]:
+        """Calibrated outputs with relative errors -> their ``log(y + floor)`` map.
+
+        The floor is the stated one, else 1 % of the mean measured value of the
+        training periods (training data only).
+        """
+        out = {}
+        outputs = self.study.outputs
+        for name in outputs.calibrate:
+            if outputs.relative(name):
+                floor = outputs.floor(name)
+                if floor is None:
+                    train = self.measured.layout.cut(np.asarray(self.measured.outputs[name]))
+                    floor = 0.01 * abs(float(np.nanmean(train)))
+                out[name] = LogLevel(floor)
+        return out
+
     def seed(self, stage: str, explicit: int | None = None) -> int:
         """The stage's seed: ``explicit`` or derived from the master seed."""
         return int(explicit) if explicit is not None else derived_seed(self.study.study.seed, stage)
@@ -131,7 +151,29 @@ def prepare(study: Study, options: Options | None = None) -> Context:
     measured = load_measured(study)
     simulator = build_simulator(study)
     out = study.root / study.study.output_dir
-    return Context(study, measured, simulator, out, options or Options())
+    ctx = Context(study, measured, simulator, out, options or Options())
+    level_values(ctx, {n: measured.outputs[n] for n in ctx.transforms}, "measured")
+    return ctx
+
+
+def level_values(
+    ctx: Context, series: Mapping[str, np.ndarray], what: str
+) -> dict[str, np.ndarray]:
+    """``series`` with the outputs of relative errors on their log scale (others as they are).
+
+    Only the samples of the training periods and the test window are read (and
+    must lie above ``-floor``); the others become NaN.
+    """
+    transforms = ctx.transforms
+    if not transforms:
+        return dict(series)
+    used = np.isin(windows(ctx.measured.layout), ("train", "test"))
+    return {
+        name: transforms[name].forward(np.where(used, np.asarray(values, float), np.nan),
+                                       f"{what} {name}")
+        if name in transforms else values
+        for name, values in series.items()
+    }  # fmt: skip
 
 
 def make_design(ctx: Context) -> Design:
@@ -222,14 +264,14 @@ def assemble_runs(ctx: Context, sims: RunResults) -> Assembled:
     section = ctx.study.emulator
     outputs = ctx.study.outputs
     noise = {
-        name: NoiseSpec(spec.model, outputs.noise_sd(name), spec.discrepancy)
+        name: NoiseSpec(spec.model, outputs.noise_sd(name), spec.discrepancy, spec.relative)
         for name in outputs.calibrate
         for spec in [outputs.errors.get(name, OutputError())]
     }
     return assemble(
         design,
-        sims.outputs,
-        ctx.measured.outputs,
+        level_values(ctx, sims.outputs, "simulated"),
+        level_values(ctx, ctx.measured.outputs, "measured"),
         ctx.measured.forcing.series,
         ctx.measured.layout,
         outputs=ctx.study.outputs.calibrate,
@@ -439,9 +481,10 @@ def _band(
     # the emulator reproduces the simulator (leave-one-run-out CV), but outside
     # their conditions only the simulator is trustworthy (Twin House test week:
     # emulator + Delta RMSE 2.25 W/m², simulator + Delta see docs/case-studies.md).
+    transforms = ctx.transforms
     if section.method == "simulator":
         runs, lam_star, drawn = posterior_runs(ctx, posterior, section.runs)
-        model_runs = {o: runs[o] for o in em.emulator.outputs.names}
+        model_runs = level_values(ctx, {o: runs[o] for o in em.emulator.outputs.names}, "simulated")
         if discrepancy is None and section.noise == "simulator":
             lam_star = simulator_noise(em.assembled, model_runs, posterior, drawn)
         band = simulator_band(
@@ -454,6 +497,7 @@ def _band(
             model_error=conditioned_discrepancy(
                 em.emulator, em.assembled, posterior, drawn, model_runs
             ),
+            transforms=transforms,
         )
         held = ctx.study.outputs.held_out
         if discrepancy is not None or not held:
@@ -474,4 +518,5 @@ def _band(
         level=section.level,
         discrepancy=discrepancy,
         measured=measured,
+        transforms=transforms,
     )

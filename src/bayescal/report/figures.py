@@ -380,6 +380,7 @@ def plot_emulator_loo(
     predicted: Mapping[str, ArrayLike],
     z: Mapping[str, ArrayLike],
     rmse: Mapping[str, float] | None = None,
+    log_scale: Sequence[str] = (),
 ) -> Path:
     """Leave-one-out check: predicted against simulated, and residuals against N(0, 1).
 
@@ -394,6 +395,8 @@ def plot_emulator_loo(
         Output name -> standardised residuals ``(y - mean) / sd``. [-]
     rmse
         Output name -> LOO RMSE shown in the title, in the output's unit.
+    log_scale
+        Outputs with relative errors: their values are ``log(y + floor)``.
 
     Returns
     -------
@@ -409,8 +412,9 @@ def plot_emulator_loo(
         ax_s.scatter(y[pick], f[pick], s=3, alpha=0.35, color=COLOURS["model"], rasterized=True)
         ends = [float(np.nanmin([y.min(), f.min()])), float(np.nanmax([y.max(), f.max()]))]
         ax_s.plot(ends, ends, color="black", lw=1, label="1:1")
-        ax_s.set_xlabel(f"simulated {label(name)}")
-        ax_s.set_ylabel(f"LOO predicted {label(name)}")
+        what = f"log({name} + floor)" if name in log_scale else label(name)
+        ax_s.set_xlabel(f"simulated {what}")
+        ax_s.set_ylabel(f"LOO predicted {what}")
         extra = f", RMSE {rmse[name]:.3g}" if rmse and name in rmse else ""
         ax_s.set_title(f"{name}: leave-one-run-out{extra}", fontsize=10)
         ax_s.grid(alpha=0.3)

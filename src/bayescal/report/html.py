@@ -285,6 +285,7 @@ def _emulator_figures(inputs: ReportInputs, folder: Path) -> list[FigureEntry]:
                 {n: v[1] for n, v in loo_means.items()},
                 z,
                 loo.rmse,
+                [o.name for o in inputs.posterior.noise if o.unit == "relative"],
             ),
         ),
     ]
