@@ -19,8 +19,8 @@ import pytest
 from bayescal import examples
 from bayescal.config import BoxSimulator, load_study
 from bayescal.data.measured import load_measured
-from bayescal.examples import copy_example
 from bayescal.pipeline import Options, Results, run
+from box_study import reduced_box
 
 SERIAL = Options(backend="serial", chains_backend="serial")
 CASES = ("box-coheating", "box-freefloat")
@@ -33,29 +33,6 @@ TABLE_5 = {
     "r_ag": (0.26, 0.17, 0.35),
     "t_w": (0.61, 0.5, 0.72),
 }
-
-#: Reduced sizes: 16 runs (4 per parameter) and short chains.
-REDUCED = """
-[design]
-runs = 16
-
-[emulator]
-pca_variance = 0.999
-burn = 100
-samples = 100
-
-[calibration]
-chains = 4
-burn = 300
-samples = 500
-
-[discrepancy]
-enabled = false
-
-[predict]
-method = "simulator"
-runs = 10
-"""
 
 
 @pytest.mark.parametrize("case", CASES)
@@ -82,11 +59,7 @@ def test_examples_validate_with_the_papers_set_up(case: str) -> None:
 
 
 def _folder(case: str, tmp_path: Path) -> Path:
-    target = copy_example(case, tmp_path / case)
-    path = target / "study.toml"
-    text = path.read_text(encoding="utf-8")
-    path.write_text(text[: text.index("[design]")] + REDUCED, encoding="utf-8")
-    return target
+    return reduced_box(case, tmp_path / case)
 
 
 @pytest.fixture(scope="module", params=CASES)

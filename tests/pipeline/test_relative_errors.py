@@ -28,6 +28,7 @@ from bayescal.errors import ConfigError, DataError
 from bayescal.examples import copy_example
 from bayescal.pipeline.compare import relative_jacobian
 from bayescal.pipeline.predict import simulator_band, simulator_noise
+from box_study import reduced_box
 from virtual_wall import PRIORS, simulate, virtual_experiment
 
 DRAWS = 12
@@ -241,43 +242,11 @@ def test_compare_adds_the_log_jacobian_per_period() -> None:
     assert np.isnan(shifted.refit).all()
 
 
-REDUCED = """
-[design]
-runs = 16
-
-[emulator]
-pca_variance = 0.999
-burn = 100
-samples = 100
-
-[calibration]
-chains = 4
-burn = 300
-samples = 500
-
-[discrepancy]
-enabled = false
-
-[predict]
-method = "simulator"
-runs = 10
-"""
-
-
 def _box(tmp_path: Path, name: str, relative: bool) -> Path:
-    folder = copy_example("box-coheating", tmp_path / name)
-    path = folder / "study.toml"
-    text = path.read_text(encoding="utf-8")
-    text = text[: text.index("[design]")] + REDUCED
-    if relative:
-        # the box is cooled at times in some runs (heating power down to -46 W): a floor
-        # of 60 W keeps every level positive (errors relative above it, absolute below)
-        text = text.replace(
-            "[outputs.errors.heating_power]",
-            '[outputs.errors.heating_power]\nrelative = true\nfloor = "60 W"', 1,
-        )  # fmt: skip
-    path.write_text(text, encoding="utf-8")
-    return folder
+    # the box is cooled at times in some runs (heating power down to -46 W): a floor
+    # of 60 W keeps every level positive (errors relative above it, absolute below)
+    errors = 'relative = true\nfloor = "60 W"' if relative else ""
+    return reduced_box("box-coheating", tmp_path / name, errors)
 
 
 @pytest.mark.slow
