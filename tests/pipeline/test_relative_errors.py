@@ -266,6 +266,12 @@ def test_a_study_with_relative_errors_runs_and_compare_prefers_the_true_error_mo
     assert res.posterior is not None
     assert res.predictions is not None
     assert [o.unit for o in res.posterior.noise] == ["relative"]
+    from bayescal.cli.progress import describe
+
+    shown = describe(res)
+    assert "on the scale of log(heating_power + floor)" in shown
+    assert "measurement noise of heating_power (ar1): SD" in shown
+    assert "relative" in shown
     ds = res.predictions.dataset
     train = ds["window"].values == "train"
     mean = ds["heating_power_calibrated"].values[train]

@@ -188,10 +188,12 @@ def describe(res: Results) -> str:
         else:
             lines += ["", "diagnostics: all passed (R-hat <= 1.01, bulk and tail ESS >= 400)"]
     if res.emulator is not None:
+        logs = res.context.transforms
         for name, rmse in res.emulator.loo.rmse.items():
+            scale = f", on the scale of log({name} + floor)" if name in logs else ""
             lines.append(
                 f"emulator leave-one-run-out RMSE of {name}: {rmse:.4g} "
-                f"(output SD {res.emulator.loo.output_sd[name]:.4g})"
+                f"(output SD {res.emulator.loo.output_sd[name]:.4g}){scale}"
             )
     if res.predictions is not None:
         m = res.predictions.metrics

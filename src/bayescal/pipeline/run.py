@@ -314,10 +314,12 @@ def _emulator(r: _Runner, sims: RunResults) -> EmulatorResult:
         ),
     )
     emulator_store.save_emulator_cv(em.loo, r.out / emulator_store.CV_FILE)
+    logs = r.ctx.transforms
     for name, rmse in em.loo.rmse.items():
+        scale = f", on the scale of log({name} + floor)" if name in logs else ""
         r.say(
             f"emulator: leave-one-run-out RMSE of {name} {rmse:.4g} "
-            f"(output SD {em.loo.output_sd[name]:.4g}); {em.emulator.basis.p} basis vectors"
+            f"(output SD {em.loo.output_sd[name]:.4g}{scale}); {em.emulator.basis.p} basis vectors"
         )
     r.finish("emulator", [emulator_store.FILE, emulator_store.CV_FILE], start)
     return em
