@@ -50,6 +50,7 @@ from bayescal.emulator.basis import (
 from bayescal.emulator.kernel import FloatArray
 from bayescal.emulator.noise import (
     DEFAULT_NOISE_PRIOR,
+    RELATIVE_UNIT,
     ErrorModel,
     ObservationModel,
     OutputNoise,
@@ -418,7 +419,7 @@ def _observations(
             DEFAULT_NOISE_PRIOR if spec.sd is None else noise_prior_from_sd(spec.sd, scale, name)
         )
         bases = tuple(j for j, g in enumerate(basis.groups) if g == q)
-        unit = "relative" if spec.relative else GLOSSARY[name].unit if name in GLOSSARY else ""
+        unit = RELATIVE_UNIT if spec.relative else GLOSSARY[name].unit if name in GLOSSARY else ""
         outputs.append(
             OutputNoise(
                 name, (sl.start, sl.stop), bases, spec.model, prior, scale, unit, spec.discrepancy

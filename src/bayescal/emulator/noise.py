@@ -51,6 +51,7 @@ from bayescal.errors import ConfigError, DataError
 
 __all__ = [
     "DEFAULT_NOISE_PRIOR",
+    "RELATIVE_UNIT",
     "ErrorModel",
     "GlsPieces",
     "LogLevel",
@@ -72,6 +73,10 @@ PHI_MAX = 0.999
 #: Range of the relative variance ``r`` of a model discrepancy (log-uniform prior):
 #: from negligible to as large as the emulator's prior variance of a weight.
 DELTA_RANGE = (1e-4, 1.0)
+
+
+#: The unit of an output with relative errors: its noise SD is a fraction of the level.
+RELATIVE_UNIT = "relative"
 
 
 @dataclass(frozen=True)
@@ -378,26 +383,21 @@ class ObservationModel:
         w = linalg.solve(kz.T @ kz, kz.T @ yz, assume_a="pos")
         return np.ascontiguousarray(np.asarray(w, dtype=float).T)
 
-    def precision_given(
-        self, q: int, resid: FloatArray, phi: float = 0.0, *, white: bool = False
-    ) -> tuple[float, float]:
+    def precision_given(self, q: int, resid: FloatArray) -> tuple[float, float]:
         """Gamma ``(shape, rate)`` of ``lambda*`` of output ``q`` given known residuals.
 
         ``resid`` ``(n_o, m')`` are standardised residuals of whole periods (the
         measurement minus a model known exactly there, e.g. the simulator re-run
         at a posterior draw); a period with a missing value is left out. The
         output's prior is updated with shape ``n_o m' / 2`` and rate
-        ``resid^T R(phi)^-1 resid / 2`` (``R = I`` for white errors): the
-        conditional posterior of the noise precision given that model and
-        ``phi``. ``white=True`` takes ``R = I`` whatever the error model: the
-        mean square, an unbiased estimate of the marginal variance ``1/lambda*``
-        whatever the residuals' correlation.
+        ``resid^T resid / 2``, whatever the error model: the mean square is an
+        unbiased estimate of the marginal variance ``1/lambda*`` (``R`` has a
+        unit diagonal) whatever the residuals' correlation.
         """
         o = self.outputs[q]
         r = np.asarray(resid, dtype=float)
         r = r[:, np.all(np.isfinite(r), axis=0)]
-        z = ar1_whiten(r, phi) if o.model == "ar1" and not white else r
-        return o.prior[0] + 0.5 * r.size, o.prior[1] + 0.5 * float(np.sum(z * z))
+        return o.prior[0] + 0.5 * r.size, o.prior[1] + 0.5 * float(np.sum(r * r))
 
     def noise_block(self, q: int, lam_star: float, phi: float = 0.0) -> FloatArray:
         """Covariance ``(p_o, p_o)`` of one period's observed-weight errors of output ``q``.

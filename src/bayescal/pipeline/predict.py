@@ -422,7 +422,7 @@ def simulator_noise(
         sims = assembled.layout.cut(np.asarray(runs[noise.name], dtype=float))
         for s in range(pick.size):
             resid = measured - (sims[s] - st.mean[:, None]) / st.sd[:, None]
-            shape, rate = obs.precision_given(q, resid, white=True)
+            shape, rate = obs.precision_given(q, resid)
             lam[s, q] = (shape - 1.0) / rate
     return lam
 

@@ -33,6 +33,7 @@ from bayescal.atomic import atomic_write_text
 from bayescal.calibration.posterior import Posterior
 from bayescal.design import Design
 from bayescal.emulator.gp import Emulator, LooResult
+from bayescal.emulator.noise import RELATIVE_UNIT
 from bayescal.glossary import GLOSSARY
 from bayescal.metrics import MODELS, MetricColumn, metric_columns
 from bayescal.report import figures as fg
@@ -285,7 +286,7 @@ def _emulator_figures(inputs: ReportInputs, folder: Path) -> list[FigureEntry]:
                 {n: v[1] for n, v in loo_means.items()},
                 z,
                 loo.rmse,
-                [o.name for o in inputs.posterior.noise if o.unit == "relative"],
+                [o.name for o in inputs.posterior.noise if o.unit == RELATIVE_UNIT],
             ),
         ),
     ]
