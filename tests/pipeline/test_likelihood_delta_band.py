@@ -21,7 +21,12 @@ import pytest
 
 from bayescal.calibration.posterior import Posterior, calibrate
 from bayescal.emulator.assemble import NoiseSpec, assemble
-from bayescal.pipeline.predict import conditioned_discrepancy, predict_band, simulator_band
+from bayescal.pipeline.predict import (
+    conditioned_discrepancy,
+    emulator_with_test_window,
+    predict_band,
+    simulator_band,
+)
 from virtual_wall import simulate
 
 
@@ -105,12 +110,10 @@ def test_emulator_route_reproduces_the_measured_weights_in_the_limit(
     for s in range(pick.size):
         got = a.layout.cut(mean[s])
         np.testing.assert_allclose(got, want, rtol=0, atol=1e-6 * np.abs(want).max())
-        # what is left is the emulator's out-of-basis variance 1 / lambda
-        np.testing.assert_allclose(
-            a.layout.cut(var[s]),
-            np.broadcast_to((a.outputs.sd**2 / em.lam)[:, None], got.shape),
-            rtol=1e-4,
-        )
+        # nothing is left: the noise (here ~0) carries the out-of-basis part on the
+        # training periods, and the emulator's 1 / lambda is not added again
+        scale = float(np.max(a.outputs.sd**2 / em.lam))
+        assert np.all(np.abs(a.layout.cut(var[s])) <= 1e-4 * scale)
     band = predict_band(em, a, post, draws=20)
     assert np.all(np.isfinite(band.mean["heat_flux_in"][_train_mask(a)]))
 
@@ -123,3 +126,33 @@ def test_a_posterior_without_r_has_nothing_to_condition(
     keep = [post.aux_names.index(n) for n in names]
     plain = dataclasses.replace(post, aux=post.aux[..., keep], aux_names=names)
     assert conditioned_discrepancy(em, a, plain, np.arange(3)) == {}
+
+
+def test_emulator_route_with_a_test_window_conditions_on_its_runs(
+    paper_wall: tuple[Any, Any, Any],
+) -> None:
+    # The emulator extended to the test window's runs (method.md section 6) keeps the
+    # discrepancy conditioned on the training periods alone, and the test window's
+    # variance holds the out-of-basis excess there.
+    ve, _, em = paper_wall
+    a = assemble(
+        ve.design, ve.runs, ve.measured, ve.boundary, ve.layout, variance=0.99,
+        noise={"heat_flux_in": NoiseSpec("white", None, discrepancy=True)},
+    )  # fmt: skip
+    post = calibrate(em, a, n_chains=2, n_burn=100, n_draws=50, seed=3, backend="serial",
+                     observations=a.observations)  # fmt: skip
+    ext = emulator_with_test_window(em, a)
+    assert ext.x.shape[0] == a.n_periods + a.x_test.shape[0]
+    pick = np.arange(0, 100, 33)
+    mean, var = conditioned_discrepancy(ext, a, post, pick)["heat_flux_in"]
+    test = np.zeros(a.layout.n_total, dtype=bool)
+    test[a.layout.test_begin :] = True
+    assert np.all(np.isfinite(mean[:, test]))
+    excess = a.out_of_basis_excess()
+    assert excess.max() > 0.0
+    floor = (a.outputs.sd**2 * excess)[:, None]  # (samples per period, 1)
+    assert np.all(a.layout.cut(var, "test") >= floor[None] * (1.0 - 1e-12))
+    band = predict_band(
+        em, a, post, draws=20, measured={"heat_flux_in": ve.measured["heat_flux_in"]}
+    )
+    assert np.all(np.isfinite(band.lower["heat_flux_in"][test]))

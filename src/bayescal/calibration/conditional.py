@@ -137,7 +137,9 @@ class OutputDiscrepancy:
         emulator
             The trained emulator (its correlation over ``x`` and ``1 / tau``).
         observations
-            Error models and measured training periods (their ``x`` is ``emulator.x``).
+            Error models and measured training periods (their ``x`` is the first
+            ``m*`` rows of ``emulator.x``: an emulator extended to the test
+            window, :meth:`~bayescal.emulator.gp.Emulator.extended`, has them first).
         q
             Output index.
         x_new
@@ -146,7 +148,8 @@ class OutputDiscrepancy:
         if q not in observations.delta_outputs:
             raise ValueError(f"output {observations.outputs[q].name!r} has no discrepancy")
         bases = list(observations.outputs[q].bases)
-        x_all = np.vstack([emulator.x, np.atleast_2d(x_new)])
+        x_obs = emulator.x[: observations.y_star.shape[1]]
+        x_all = np.vstack([x_obs, np.atleast_2d(x_new)])
         kernels = emulator.kernels
         return cls(
             observations,

@@ -198,6 +198,14 @@ class Assembled:
         Standardised measured test periods, ``(N, m_test)``; NaN where missing. [-]
     observations
         The outputs' error models with the measured training periods.
+    y_test_sim_std
+        The design runs on the periods covering the test window, standardised
+        like ``y_std``, ``(N, R m_test)``, run-major columns: the simulator is
+        driven by the known boundary conditions there, so the emulator's
+        predictions on the test window are conditioned on them too
+        (:meth:`~bayescal.emulator.gp.Emulator.extended`). No measurement of
+        the test window enters. ``None``: no test window, or a run not finite
+        there. [-]
     """
 
     parameter_names: tuple[str, ...]
@@ -218,6 +226,7 @@ class Assembled:
     x_test: FloatArray
     y_star_test_std: FloatArray
     observations: ObservationModel
+    y_test_sim_std: FloatArray | None = None
 
     @property
     def n_runs(self) -> int:
@@ -233,6 +242,28 @@ class Assembled:
     def input_labels(self) -> list[str]:
         """Labels of the columns of ``z = [theta, x]``."""
         return list(self.parameter_names) + self.inputs.labels
+
+    def out_of_basis_excess(self) -> FloatArray:
+        """The out-of-basis variance of the test window beyond the training periods', ``(N,)``.
+
+        Per output (standardised units, one value for its rows): the mean square of
+        what the output basis leaves of the design runs on the periods covering the
+        test window, less that on the training periods, or 0 where it is smaller.
+        The calibration's noise ``1/lambda*`` already holds the measured signal's
+        out-of-basis part on the training periods (method.md section 4a); a test
+        window unlike them has more of it (its series have shapes the basis was not
+        built from), and the emulator route's band adds the excess (method.md
+        section 6). Zeros without the test window's runs.
+        """
+        out = np.zeros(self.y_std.shape[0])
+        if self.y_test_sim_std is None:
+            return out
+        basis = self.basis
+        train = self.y_std - basis.reconstruct(basis.weights(self.y_std))
+        test = self.y_test_sim_std - basis.reconstruct(basis.weights(self.y_test_sim_std))
+        for sl in self.outputs.slices.values():
+            out[sl] = max(0.0, float(np.mean(test[sl] ** 2) - np.mean(train[sl] ** 2)))
+        return out
 
 
 def runs_to_columns(cut: ArrayLike) -> FloatArray:
@@ -377,6 +408,14 @@ def assemble(
         if layout.test_starts.size
         else np.zeros((0, inputs.x.shape[1]))
     )
+    y_test_sim = None
+    if layout.test_starts.size:
+        sims_test = {
+            n: runs_to_columns(layout.cut(_runs_array(runs, n, n_runs, n_total), "test"))
+            for n in names
+        }
+        if all(np.isfinite(v).all() for v in sims_test.values()):
+            y_test_sim = stack.apply(sims_test)
     priors = dict(design.priors)
     lower = [p.lower for p in priors.values()]
     upper = [p.upper for p in priors.values()]
@@ -400,6 +439,7 @@ def assemble(
         x_test=x_test,
         y_star_test_std=y_test_std,
         observations=observations,
+        y_test_sim_std=y_test_sim,
     )
 
 

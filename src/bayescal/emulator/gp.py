@@ -13,7 +13,7 @@ simulator's out-of-basis part, eq. 3) times ``sd^2``.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -304,6 +304,45 @@ class Emulator:
             raise DataError(f"theta has {th.shape[0]} rows and x {xx.shape[0]}; expected equal")
         return np.broadcast_to(th, (q, t)), np.broadcast_to(xx, (q, s))
 
+    def extended(self, x_new: ArrayLike, y_new_std: ArrayLike) -> Emulator:
+        """The same emulator (hyperparameters kept) conditioned on more periods of the runs.
+
+        Parameters
+        ----------
+        x_new
+            Normalised conditions of ``P`` further periods, ``(P, s)``. [-]
+        y_new_std
+            The design runs on those periods, standardised like ``y_std``,
+            ``(N, R P)``, run-major columns. [-]
+
+        Returns
+        -------
+        Emulator
+            Its grid is the ``R`` runs x the ``m* + P`` periods (training periods
+            first): it predicts at the new periods by interpolating in ``theta``
+            between runs made under those very conditions, not by extrapolating in
+            ``x``. Its leave-one-run-out CV covers all ``m* + P`` periods.
+        """
+        xx = np.atleast_2d(np.asarray(x_new, dtype=float))
+        y_new = np.asarray(y_new_std, dtype=float)
+        n_runs, n_per, n_new = self.theta.shape[0], self.x.shape[0], xx.shape[0]
+        if xx.shape[1] != self.x.shape[1] or y_new.shape != (self.y_std.shape[0], n_runs * n_new):
+            raise DataError(
+                f"expected x of {n_new} periods with {self.x.shape[1]} columns and runs "
+                f"{(self.y_std.shape[0], n_runs * n_new)}, got {xx.shape} and {y_new.shape}"
+            )
+        n = self.y_std.shape[0]
+        y_all = np.concatenate(
+            [self.y_std.reshape(n, n_runs, n_per), y_new.reshape(n, n_runs, n_new)], axis=2
+        ).reshape(n, -1)
+        return replace(
+            self,
+            x=np.vstack([self.x, xx]),
+            y_std=y_all,
+            w=self.basis.weights(y_all),
+            conditional=None,
+        )
+
     def predict_weights(self, theta_unit: ArrayLike, x: ArrayLike) -> tuple[FloatArray, FloatArray]:
         """Predictive mean and variance of the weights ``(q, p)`` at normalised inputs.
 
@@ -339,13 +378,23 @@ class Emulator:
         picked = range(len(self._cond)) if bases is None else bases
         return np.stack([self._cond[j].joint_cov(th, xx) for j in picked])
 
-    def predict_std(self, theta_unit: ArrayLike, x: ArrayLike) -> tuple[FloatArray, FloatArray]:
-        """Mean and variance of standardised output ``(N, q)`` at normalised inputs."""
+    def predict_std(
+        self, theta_unit: ArrayLike, x: ArrayLike, *, out_of_basis: bool = True
+    ) -> tuple[FloatArray, FloatArray]:
+        """Mean and variance of standardised output ``(N, q)`` at normalised inputs.
+
+        ``out_of_basis=False`` leaves the out-of-basis variance ``1 / lambda`` out
+        of the variance (the calibrated bands carry it in the noise, method.md
+        section 6).
+        """
         mean_w, var_w = self.predict_weights(theta_unit, x)
         k = self.basis.k
-        return k @ mean_w.T, (k * k) @ var_w.T + 1.0 / self.lam
+        var = (k * k) @ var_w.T
+        return k @ mean_w.T, var + 1.0 / self.lam if out_of_basis else var
 
-    def predict(self, theta_phys: ArrayLike, x: ArrayLike) -> tuple[FloatArray, FloatArray]:
+    def predict(
+        self, theta_phys: ArrayLike, x: ArrayLike, *, out_of_basis: bool = True
+    ) -> tuple[FloatArray, FloatArray]:
         """Predictive mean and variance of the simulator output in physical units.
 
         Parameters
@@ -356,6 +405,8 @@ class Emulator:
         x
             Normalised variable conditions of the periods, ``(q, s)`` or ``(s,)``
             (rows of ``Assembled.x`` or ``inputs.transform(...)``). [-]
+        out_of_basis
+            Include the out-of-basis noise ``1 / lambda`` in the variance.
 
         Returns
         -------
@@ -363,10 +414,10 @@ class Emulator:
             ``(N, q)`` each: column ``i`` is the period at input pair ``i``,
             outputs stacked along the rows (``outputs.split``), mean in the
             outputs' units, variance in their squares. The variance includes
-            the out-of-basis noise ``1 / lambda``.
+            the out-of-basis noise ``1 / lambda`` unless ``out_of_basis`` is False.
         """
         th, xx = self._pairs(theta_phys, x)
-        mean, var = self.predict_std(self.theta_normaliser.apply(th), xx)
+        mean, var = self.predict_std(self.theta_normaliser.apply(th), xx, out_of_basis=out_of_basis)
         sd = self.outputs.sd[:, None]
         return self.outputs.invert(mean), var * sd * sd
 

@@ -4,8 +4,9 @@
 *measurement* is the mixture over ``S`` posterior draws of Gaussians
 (:mod:`bayescal.calibration.predictive`): for draw ``s`` the model's prediction at
 theta*_s (the emulator's mean, or the simulator re-run at theta*_s), the
-emulator's own interpolation variance (emulator predictions only; it includes
-the out-of-basis variance ``1/lambda``), the observation noise of the draw
+emulator's own interpolation variance (emulator predictions only: its
+in-basis variance, and on the test window the out-of-basis variance beyond the
+training periods', :meth:`Assembled.out_of_basis_excess`), the observation noise of the draw
 (``sd^2 / lambda*_s`` with ``sd`` the output's standardisation scale: with
 "output" standardisation this is the noise SD in the output's unit squared; on
 the simulator route estimated again from the runs, see below), and,
@@ -30,6 +31,12 @@ where the test periods' conditions lie outside the training ones. Its noise is
 estimated again at every draw from the run's residuals on the training periods
 (:func:`simulator_noise`; ``[predict] noise = "calibration"`` keeps lambda*):
 lambda* also holds the emulator's error, which the re-run simulator does not make.
+
+With ``method = "emulator"`` the emulator is also conditioned on the design
+runs over the test window (:func:`emulator_with_test_window`: they were simulated
+under its known boundary conditions), so it interpolates there between runs as
+on the training periods; and the band adds the out-of-basis variance by which
+the test window's runs exceed the training periods' (:meth:`Assembled.out_of_basis_excess`).
 
 Samples of the training periods get the training predictions; samples of the
 test window get the predictions of the periods covering it. Everything else
@@ -76,6 +83,7 @@ __all__ = [
     "Band",
     "DiscrepancyModel",
     "conditioned_discrepancy",
+    "emulator_with_test_window",
     "metrics_table",
     "predict_band",
     "predictions_dataset",
@@ -184,20 +192,30 @@ def _period_moments(
     lam_stars: np.ndarray,
     x: np.ndarray,
     discrepancy: DiscrepancyModel | None,
+    excess: np.ndarray,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Means and variances ``(S, N, P)`` of a measurement at ``P`` periods, per draw."""
+    """Means and variances ``(S, N, P)`` of a measurement at ``P`` periods, per draw.
+
+    The variance is the emulator's in-basis variance, the draw's noise and
+    ``excess`` ``(N,)``, the out-of-basis variance beyond the training periods'
+    (standardised; :meth:`Assembled.out_of_basis_excess`).
+    """
     s, p = theta.shape[0], x.shape[0]
     th = np.repeat(theta, p, axis=0)
     xx = np.tile(x, (s, 1))
     # Chunks of whole draws keep the (pairs x runs) work arrays to ~100 MB.
     per = max(1, PAIRS_PER_CHUNK // p) * p
-    parts = [emulator.predict(th[i : i + per], xx[i : i + per]) for i in range(0, s * p, per)]
+    parts = [
+        emulator.predict(th[i : i + per], xx[i : i + per], out_of_basis=False)
+        for i in range(0, s * p, per)
+    ]
     mean = np.concatenate([m for m, _ in parts], axis=1)  # (N, S P)
     var = np.concatenate([v for _, v in parts], axis=1)
     n = mean.shape[0]
     mean = mean.reshape(n, s, p).transpose(1, 0, 2)
     var = var.reshape(n, s, p).transpose(1, 0, 2)
     sd = emulator.outputs.sd
+    var += (sd * sd * excess)[None, :, None]
     for q, sl in enumerate(emulator.outputs.slices.values()):
         var[:, sl] += (sd[sl] * sd[sl])[None, :, None] / lam_stars[:, q, None, None]
     if discrepancy is not None:
@@ -256,15 +274,18 @@ def predict_band(
     """
     theta, lam_stars, pick = _thin(posterior, draws)
     layout = assembled.layout
+    emulator = emulator_with_test_window(emulator, assembled)
     parts = _predicted_parts(assembled)
     slices = emulator.outputs.slices
     s = theta.shape[0]
     means = {n: np.full((s, layout.n_total), np.nan) for n in slices}
     variances = {n: np.full((s, layout.n_total), np.nan) for n in slices}
-    for x, starts, begin in parts:
+    excess = assembled.out_of_basis_excess()
+    for i, (x, starts, begin) in enumerate(parts):
         if not len(starts):
             continue
-        mean, var = _period_moments(emulator, theta, lam_stars, x, discrepancy)
+        extra = excess if i else np.zeros_like(excess)  # parts: training periods, test window
+        mean, var = _period_moments(emulator, theta, lam_stars, x, discrepancy, extra)
         for name, sl in slices.items():
             _place(layout, starts, mean[:, sl], means[name], begin)
             _place(layout, starts, var[:, sl], variances[name], begin)
@@ -273,6 +294,23 @@ def predict_band(
         noise = _phase_sd(assembled, name) ** 2 / lam_stars[:, order.index(name), None]
         means[name], variances[name] = mean, var + noise
     return _mixture_band(means, variances, measured or {}, level, transforms)
+
+
+def emulator_with_test_window(emulator: Emulator, assembled: Assembled) -> Emulator:
+    """The emulator conditioned also on the design runs over the test window.
+
+    The design runs are simulated over the whole record, the test window
+    included (the simulator is driven by the known boundary conditions, not by
+    measurements there), so the emulator need not extrapolate to the test
+    periods' conditions: conditioned on those runs too (hyperparameters kept,
+    :meth:`~bayescal.emulator.gp.Emulator.extended`) it interpolates between
+    runs made under them, as on the training periods. Unchanged when there is
+    no test window or the runs are not finite on it.
+    """
+    y_new = assembled.y_test_sim_std
+    if y_new is None or not assembled.x_test.shape[0]:
+        return emulator
+    return emulator.extended(assembled.x_test, y_new)
 
 
 def _phase_sd(assembled: Assembled, name: str) -> np.ndarray:
@@ -321,8 +359,8 @@ def conditioned_discrepancy(
         the training periods and the test window, physical units. With
         ``runs``: the discrepancy's conditioned mean and variance, to add to the
         runs. Without: the whole model + discrepancy part, the mean of the
-        output and its variance without the observation noise (with the
-        out-of-basis ``1 / lambda``).
+        output and its variance without the observation noise (with the test
+        window's out-of-basis excess, :meth:`Assembled.out_of_basis_excess`).
     """
     obs = assembled.observations
     if not obs.delta_outputs or not set(obs.names()) <= set(posterior.aux_names):
@@ -335,6 +373,7 @@ def conditioned_discrepancy(
     x_new = np.vstack([x for x, _, _ in parts])
     m = assembled.n_periods
     x_all = np.vstack([assembled.x, x_new])
+    beyond = assembled.out_of_basis_excess()
     out = {}
     for q in obs.delta_outputs:
         noise = obs.outputs[q]
@@ -342,6 +381,9 @@ def conditioned_discrepancy(
         st = assembled.outputs.standardisations[q]
         ko = obs.block(q)[0]
         field = OutputDiscrepancy.build(emulator, obs, q, x_new)
+        # the test window's out-of-basis excess (emulator route), by column
+        excess = np.zeros((ko.shape[0], x_new.shape[0]))
+        excess[:, m:] = beyond[assembled.outputs.slices[name]][:, None]
         mean = np.full((pick.size, layout.n_total), np.nan)
         var = np.full((pick.size, layout.n_total), np.nan)
         for s in range(pick.size):
@@ -352,14 +394,14 @@ def conditioned_discrepancy(
                     :, None
                 ]
                 shift, cov = field.condition(values, obs.weights_of(q, y_sim, phi))
-                w_new, extra = shift, 0.0
+                w_new, extra = shift, np.zeros_like(excess)
                 offset = np.zeros(ko.shape[0])
             else:
                 theta = np.broadcast_to(unit[s], (x_all.shape[0], t))
                 w_all = emulator.predict_weights(theta, x_all)[0][:, bases]
                 eta = emulator.weight_covariance(unit[s], x_all, bases)
                 shift, cov = field.condition(values, w_all[:m], eta)
-                w_new, extra = w_all[m:] + shift, 1.0 / emulator.lam
+                w_new, extra = w_all[m:] + shift, excess
                 offset = st.mean
             mu = offset[:, None] + st.sd[:, None] * (ko @ w_new.T)  # (n_o, P)
             v = st.sd[:, None] ** 2 * (np.einsum("nj,ajk,nk->na", ko, cov, ko) + extra)

@@ -393,12 +393,6 @@ def _predictions(
     if ok:
         return found
     start = time.perf_counter()
-    if r.ctx.study.predict.method == "emulator" and r.ctx.measured.layout.test_starts.size:
-        r._warn(
-            "[predict] method = 'emulator': the bands on the test window leave out the "
-            "emulator's error on periods unlike the training ones and are too narrow there "
-            "(docs/method.md, section 6); method = 'simulator' re-runs the simulator instead"
-        )
     pred = predict_stage(r.ctx, em, post, disc, nominal_run(r.ctx))
     files = predictions_store.save_predictions(r.out, pred.dataset, pred.metrics)
     r.finish("predict", files, start)

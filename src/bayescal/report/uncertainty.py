@@ -34,7 +34,9 @@ NOISE_TEXT = (
 BAND_TEXT = (
     "A band is the central interval of the predictive distribution of a measurement: "
     "the model's prediction at each posterior draw of θ* (parameter uncertainty), the "
-    "emulator's own interpolation uncertainty (emulator predictions), the measurement "
+    "emulator's own interpolation uncertainty (emulator predictions: conditioned also on "
+    "the design runs over the test window, and on the test window the part of the "
+    "runs outside the output basis beyond the training periods' share), the measurement "
     "noise of that draw (its error model; when the simulator is re-run for the bands, "
     "estimated again from the runs' residuals on the training periods, because the noise "
     "SD below also holds the emulator's own error), an output's in-likelihood discrepancy "
