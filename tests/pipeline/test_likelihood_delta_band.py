@@ -30,16 +30,21 @@ from bayescal.pipeline.predict import (
 from virtual_wall import simulate
 
 
-@pytest.fixture(scope="module")
-def with_delta(small_wall: tuple[Any, Any, Any]) -> tuple[Any, Any, Any, Any]:
-    ve, _, em = small_wall
+def _calibrated(wall: tuple[Any, Any, Any], **basis: Any) -> tuple[Any, Any, Any, Any]:
+    """The wall's emulator, its data assembled with a discrepancy, and a short posterior."""
+    ve, _, em = wall
     a = assemble(
-        ve.design, ve.runs, ve.measured, ve.boundary, ve.layout, components=2,
+        ve.design, ve.runs, ve.measured, ve.boundary, ve.layout, **basis,
         noise={"heat_flux_in": NoiseSpec("white", None, discrepancy=True)},
     )  # fmt: skip
     post = calibrate(em, a, n_chains=2, n_burn=100, n_draws=50, seed=3, backend="serial",
                      observations=a.observations)  # fmt: skip
     return ve, a, em, post
+
+
+@pytest.fixture(scope="module")
+def with_delta(small_wall: tuple[Any, Any, Any]) -> tuple[Any, Any, Any, Any]:
+    return _calibrated(small_wall, components=2)
 
 
 def _sharp(post: Posterior) -> Posterior:
@@ -134,13 +139,7 @@ def test_emulator_route_with_a_test_window_conditions_on_its_runs(
     # The emulator extended to the test window's runs (method.md section 6) keeps the
     # discrepancy conditioned on the training periods alone, and the test window's
     # variance holds the out-of-basis excess there.
-    ve, _, em = paper_wall
-    a = assemble(
-        ve.design, ve.runs, ve.measured, ve.boundary, ve.layout, variance=0.99,
-        noise={"heat_flux_in": NoiseSpec("white", None, discrepancy=True)},
-    )  # fmt: skip
-    post = calibrate(em, a, n_chains=2, n_burn=100, n_draws=50, seed=3, backend="serial",
-                     observations=a.observations)  # fmt: skip
+    ve, a, em, post = _calibrated(paper_wall, variance=0.99)
     ext = emulator_with_test_window(em, a)
     assert ext.x.shape[0] == a.n_periods + a.x_test.shape[0]
     pick = np.arange(0, 100, 33)
