@@ -26,6 +26,7 @@ from bayescal.emulator.assemble import Assembled, NoiseSpec, assemble
 from bayescal.emulator.noise import LogLevel
 from bayescal.errors import ConfigError, DataError
 from bayescal.examples import copy_example
+from bayescal.periods import layout_periods
 from bayescal.pipeline.compare import relative_jacobian
 from bayescal.pipeline.predict import simulator_band, simulator_noise
 from box_study import reduced_box
@@ -218,6 +219,44 @@ def test_outputs_below_minus_the_floor_are_refused_in_one_line() -> None:
     bad[ve.layout.test_begin + 3] = -50.0
     with pytest.raises(DataError, match=r"^simulated heat_flux_in: relative errors need values"):
         level_values(ctx, {NAME: bad}, "simulated")  # type: ignore[arg-type]
+
+
+def test_runs_are_read_on_the_whole_periods_covering_a_partial_test_window() -> None:
+    """A test window of 2.5 periods: its first period begins before it. The runs there
+    are on the log scale (the emulator route conditions on them), the measurements
+    before the window are not read."""
+    from bayescal.pipeline.stages import assemble_runs, level_values
+
+    ve = virtual_experiment(seed=11, runs=8, periods=8, warmup_days=2, test_days=4)
+    period = ve.layout.period
+    layout = layout_periods(ve.layout.n_total, period, ve.layout.warmup, 5 * period // 2)
+    first = int(layout.test_starts[0])
+    assert first < layout.test_begin
+    series = _level(ve.measured[NAME])
+    ctx = SimpleNamespace(
+        measured=SimpleNamespace(
+            layout=layout, outputs={NAME: series}, forcing=SimpleNamespace(series=ve.boundary)
+        ),
+        transforms={NAME: LogLevel(1.0)},
+        study=SimpleNamespace(
+            outputs=SimpleNamespace(calibrate=[NAME], errors={}, noise_sd=lambda _: None),
+            emulator=SimpleNamespace(
+                pca_variance=0.99, pca_components=None, input_pca_variance=0.9,
+                history_periods=0, standardise="output",
+            ),
+        ),
+    )  # fmt: skip
+    runs = _level(ve.runs[NAME])
+    simulated = level_values(ctx, {NAME: runs}, "simulated")[NAME]  # type: ignore[arg-type]
+    measured = level_values(ctx, {NAME: series}, "measured")[NAME]  # type: ignore[arg-type]
+    gap = slice(first, layout.test_begin)
+    np.testing.assert_allclose(simulated[:, gap], np.log(runs[:, gap] + 1.0))
+    assert np.isnan(measured[gap]).all()
+    sims = SimpleNamespace(design=ve.design, unit=ve.design.unit, outputs={NAME: runs})
+    a = assemble_runs(ctx, sims)  # type: ignore[arg-type]
+    assert a.y_test_sim_std is not None
+    assert np.isfinite(a.y_test_sim_std).all()
+    assert a.y_test_sim_std.shape[1] == 8 * layout.test_starts.size
 
 
 def test_compare_adds_the_log_jacobian_per_period() -> None:

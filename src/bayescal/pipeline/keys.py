@@ -110,6 +110,9 @@ def stage_keys(ctx: Context) -> dict[str, str]:
         # an in-likelihood discrepancy is conditioned on the training residuals (it added
         # its prior variance before): the predictions of such a study are computed anew
         *(["discrepancy conditioned"] if _likelihood_discrepancy(s) else []),
+        # the emulator route conditions on the test window's runs and no longer adds
+        # 1/lambda to the noise: its predictions are computed anew
+        *(["emulator on the test window's runs"] if s.predict.method == "emulator" else []),
     )
     keys["report"] = digest("report", keys["predict"], s.study.name, s.study.description)
     return keys

@@ -26,8 +26,8 @@ is stored for the report's PIT histogram (uniform when the bands mean what they
 say).
 
 With ``[predict] method = "simulator"`` the simulator itself is re-run at
-``runs`` posterior draws (:func:`simulator_band`): no emulator extrapolation
-where the test periods' conditions lie outside the training ones. Its noise is
+``runs`` posterior draws (:func:`simulator_band`): exact physics at every draw,
+no emulator error. Its noise is
 estimated again at every draw from the run's residuals on the training periods
 (:func:`simulator_noise`; ``[predict] noise = "calibration"`` keeps lambda*):
 lambda* also holds the emulator's error, which the re-run simulator does not make.
@@ -252,7 +252,9 @@ def predict_band(
     Parameters
     ----------
     emulator, assembled
-        The trained emulator and the assembled data (periods, ``x``, ``x_test``).
+        The trained emulator and the assembled data (periods, ``x``, ``x_test``,
+        and the design runs over the test window, ``y_test_sim_std``, on which
+        the emulator is conditioned too: :func:`emulator_with_test_window`).
     posterior
         theta* and lambda* draws.
     draws
@@ -309,6 +311,8 @@ def emulator_with_test_window(emulator: Emulator, assembled: Assembled) -> Emula
     """
     y_new = assembled.y_test_sim_std
     if y_new is None or not assembled.x_test.shape[0]:
+        return emulator
+    if emulator.x.shape[0] != assembled.n_periods:  # extended already
         return emulator
     return emulator.extended(assembled.x_test, y_new)
 

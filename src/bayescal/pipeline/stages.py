@@ -162,12 +162,19 @@ def level_values(
     """``series`` with the outputs of relative errors on their log scale (others as they are).
 
     Only the samples of the training periods and the test window are read (and
-    must lie above ``-floor``); the others become NaN.
+    must lie above ``-floor``); the others become NaN. Simulated series
+    (``what = "simulated"``) are also read on the whole periods covering the test
+    window (the first may begin before it): the emulator is conditioned on the
+    design runs there (:func:`bayescal.pipeline.predict.emulator_with_test_window`).
     """
     transforms = ctx.transforms
     if not transforms:
         return dict(series)
-    used = np.isin(windows(ctx.measured.layout), ("train", "test"))
+    layout = ctx.measured.layout
+    used = np.isin(windows(layout), ("train", "test"))
+    if what == "simulated":
+        for start in layout.test_starts:
+            used[start : start + layout.period] = True
     return {
         name: transforms[name].forward(np.where(used, np.asarray(values, float), np.nan),
                                        f"{what} {name}")
