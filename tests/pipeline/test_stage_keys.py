@@ -11,7 +11,9 @@ after it changed again with the difference-process sampler
 converge, whose draws differ from the old random walk's, so old results must
 not be reused); the predict key and the report's changed with ``[predict] noise``
 (the simulator route's noise estimated from the runs' training residuals, so
-bands computed before are recomputed). A change of a key makes every
+bands computed before are recomputed); with ``[predict] method = "emulator"`` the
+predict key carries the emulator's conditioning on the test window's runs
+(predictions of the emulator route made before are recomputed). A change of a key makes every
 existing output folder recompute that stage and all later ones; if a change is
 meant, say so in the release notes and update the pins.
 """
@@ -37,6 +39,10 @@ WALL_KEYS = {
 }
 
 
+#: The wall example's predict key with ``[predict] method = "emulator"``.
+EMULATOR_ROUTE_PREDICT_KEY = "1506db07f4cfecdc5e1bb27eb83768ff989a1054900ee88763fcb79d87fe9643"
+
+
 def test_stage_keys_of_the_wall_example_are_pinned(tmp_path: Path) -> None:
     folder = copy_example("wall", tmp_path / "wall")
     assert stage_keys(prepare(load_study(folder))) == WALL_KEYS
@@ -53,3 +59,18 @@ def test_digest_and_derived_seed_are_pinned() -> None:
         "db8752fbe5082ff5f97db08920bb4731e7fe5bb6e0917915cd3832c3f9b5cd0e"
     )
     assert derived_seed(20240601, "calibrate") == 529508374
+
+
+def test_the_emulator_route_changes_only_the_predict_key_and_after(tmp_path: Path) -> None:
+    """``[predict] method = "emulator"`` predictions made before the emulator was
+    conditioned on the test window's runs are computed anew: its predict key is
+    pinned with that change in it (the stages before are the wall's)."""
+    folder = copy_example("wall", tmp_path / "wall")
+    study = folder / "study.toml"
+    text = study.read_text(encoding="utf-8")
+    assert 'method = "simulator"' in text
+    study.write_text(text.replace('method = "simulator"', 'method = "emulator"'), "utf-8")
+    keys = stage_keys(prepare(load_study(folder)))
+    for stage in ("design", "simulate", "emulator", "calibrate", "discrepancy"):
+        assert keys[stage] == WALL_KEYS[stage], stage
+    assert keys["predict"] == EMULATOR_ROUTE_PREDICT_KEY
