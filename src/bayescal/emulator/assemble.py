@@ -258,9 +258,7 @@ class Assembled:
         out = np.zeros(self.y_std.shape[0])
         if self.y_test_sim_std is None:
             return out
-        basis = self.basis
-        train = self.y_std - basis.reconstruct(basis.weights(self.y_std))
-        test = self.y_test_sim_std - basis.reconstruct(basis.weights(self.y_test_sim_std))
+        train, test = self.basis.residual(self.y_std), self.basis.residual(self.y_test_sim_std)
         for sl in self.outputs.slices.values():
             out[sl] = max(0.0, float(np.mean(test[sl] ** 2) - np.mean(train[sl] ** 2)))
         return out

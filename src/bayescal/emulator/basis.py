@@ -246,10 +246,15 @@ class Basis:
         """``K w_i`` for every row of ``w`` (eq. 1): ``(n, m')`` from ``(m', p)``."""
         return self.k @ np.atleast_2d(np.asarray(w, dtype=float)).T
 
+    def residual(self, y_std: ArrayLike) -> FloatArray:
+        """``(I - K (K^T K)^-1 K^T) y_i`` for every column: what the basis leaves out."""
+        arr = np.asarray(y_std, dtype=float)
+        out: FloatArray = arr - self.reconstruct(self.weights(arr))
+        return out
+
     def residual_sum_of_squares(self, y_std: ArrayLike) -> float:
         """``sum_i y_i^T (I - K (K^T K)^-1 K^T) y_i``: what the basis leaves out."""
-        arr = np.asarray(y_std, dtype=float)
-        resid = arr - self.reconstruct(self.weights(arr))
+        resid = self.residual(y_std)
         return float(np.sum(resid * resid))
 
     def lambda_posterior(
