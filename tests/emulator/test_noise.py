@@ -23,6 +23,7 @@ import numpy as np
 import pytest
 from scipy import linalg, stats
 
+from bayescal.calibration import kron as kron_module
 from bayescal.calibration.dense import DenseCalibrationDensity
 from bayescal.calibration.kron import KronCalibrationDensity
 from bayescal.emulator.assemble import Assembled, NoiseSpec, assemble
@@ -176,6 +177,37 @@ def test_with_observations_reuses_the_grid_and_agrees_with_a_rebuild() -> None:
     assert moved.logpdf(ts, 2.0, 3.0) == rebuilt.logpdf(ts, 2.0, 3.0)
     assert moved.logpdf(ts, 2.0, 3.0) != density.logpdf(ts, 2.0, 3.0)
     assert density.stacked_grid().bases[0].eig_x is moved.stacked_grid().bases[0].eig_x
+
+
+def test_with_observations_shares_the_memos_that_do_not_depend_on_them(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """A new ``w*`` (an AR(1) coefficient's move) recomputes no simulator block, and the
+    shared memos give the values of a density built afresh, both ways."""
+    rng, kernels, theta, x = _problem(8)
+    p = len(kernels)
+    w = rng.normal(size=(theta.shape[0] * x.shape[0], p))
+    first, second = rng.normal(size=(x.shape[0], p)), rng.normal(size=(x.shape[0], p))
+    density = KronCalibrationDensity(theta, x, kernels, np.ones(p), w, first)
+    real = kron_module._sim_block
+    calls: list[float] = []
+
+    def counted(cache: Any, a: float) -> Any:
+        calls.append(a)
+        return real(cache, a)
+
+    monkeypatch.setattr(kron_module, "_sim_block", counted)
+    root = rng.normal(size=(p, p))
+    groups = [(tuple(range(p)), root @ root.T / p + 0.1 * np.eye(p))]
+    ts, a = rng.random(theta.shape[1]), rng.uniform(0.01, 0.1, p)
+    before = density.pieces_grouped(ts, a, np.ones(p), groups).logpdf
+    n_blocks = len(calls)
+    moved = density.with_observations(second)
+    after = moved.pieces_grouped(ts, a, np.ones(p), groups).logpdf
+    assert len(calls) == n_blocks == p
+    rebuilt = KronCalibrationDensity(theta, x, kernels, np.ones(p), w, second)
+    assert after == rebuilt.pieces_grouped(ts, a, np.ones(p), groups).logpdf
+    assert density.pieces_grouped(ts, a, np.ones(p), groups).logpdf == before != after
 
 
 def test_prewhitening_gives_the_ar1_quadratic_form() -> None:

@@ -59,7 +59,7 @@ from bayescal.calibration.kron import (
 )
 from bayescal.calibration.loo import PARETO_K_MAX, pointwise_log_likelihood
 from bayescal.calibration.posterior import Posterior
-from bayescal.calibration.target import BatchedPosterior, CalibrationPosterior, sample
+from bayescal.calibration.target import BatchedPosterior, CalibrationPosterior, Moves, sample
 from bayescal.design import Prior
 from bayescal.emulator.gp import Emulator
 from bayescal.emulator.noise import ObservationModel
@@ -379,6 +379,7 @@ def refit_period(
     algebra: Kind = "kronecker",
     draws_per_chain: int = 250,
     callback: Tick | None = None,
+    moves: Moves = "gibbs",
 ) -> tuple[float, Posterior]:
     """``elpd_i`` of ``period`` by an exact refit without its measurements (physical units).
 
@@ -403,6 +404,8 @@ def refit_period(
         Draws per chain the score averages over.
     callback
         Progress of the chains (iterations over all chains).
+    moves
+        How the sweeps move the coordinates, as the calibration's.
     """
     target = held_out_target(emulator, observations, list(priors.values()), period, algebra)
     names = tuple(priors)
@@ -415,6 +418,7 @@ def refit_period(
         backend=backend,
         names=(*names, *target.aux_names),
         callback=callback,
+        moves=moves,
     )
     draws = chains.draws
     t = target.t

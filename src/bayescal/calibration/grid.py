@@ -25,6 +25,7 @@ for bit.
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 from dataclasses import dataclass
 from functools import cached_property
@@ -86,7 +87,12 @@ class BasisPieces:
         obs_full = np.zeros(d.x.shape[0])
         if obs.size == d.x.shape[0]:
             obs_full[d.obs_index] = obs
-        return dataclasses.replace(self, obs=obs, obs_rot=self.eig_x.vectors.T @ obs_full)
+        # a shallow copy with two fields set: dataclasses.replace re-runs __init__, which
+        # costs as much as the rest when an AR(1) coefficient's move asks for it
+        new = copy.copy(self)
+        object.__setattr__(new, "obs", obs)
+        object.__setattr__(new, "obs_rot", self.eig_x.vectors.T @ obs_full)
+        return new
 
     @classmethod
     def build(cls, d: GridData, j: int) -> BasisPieces:
@@ -181,8 +187,7 @@ class StackedGrid:
 
     def with_observations(self, w_star: ArrayLike) -> StackedGrid:
         """The same grid with other observed weights ``(m_obs, p)``: no new eigen-decomposition."""
-        d = self.data
-        data = GridData.build(d.theta, d.x, d.kernels, d.ktk, d.w, w_star, d.obs_index)
+        data = self.data.with_observations(w_star)
         bases = tuple(b.with_observations(data, j) for j, b in enumerate(self.bases))
         return dataclasses.replace(
             self, data=data, bases=bases, obs_rot=np.stack([b.obs_rot for b in bases])

@@ -72,6 +72,9 @@ from bayescal.emulator.kron import Lru, SymEig, positive_log_sum
 __all__ = ["CalibrationAlgebra", "Kind", "KronCalibrationDensity", "make_algebra"]
 
 Method = Literal["schur", "eigen"]
+#: The memo attributes of :class:`KronCalibrationDensity` (not pickled; shared by
+#: :meth:`KronCalibrationDensity.with_observations`).
+_MEMOS = ("_sim_memo", "_c_hat_memo", "_u_g_memo", "_overlaps", "_sims_memo")
 
 
 @dataclass(frozen=True)
@@ -373,7 +376,7 @@ class KronCalibrationDensity:
 
     def __getstate__(self) -> dict[str, Any]:
         state = self.__dict__.copy()
-        for key in ("_sim_memo", "_c_hat_memo", "_u_g_memo", "_overlaps", "_sims_memo"):
+        for key in _MEMOS:
             state.pop(key)
         return state
 
@@ -394,12 +397,17 @@ class KronCalibrationDensity:
         """A new density with other observed weights (e.g. re-estimated by eq. 20).
 
         The eigen-decompositions are reused (:meth:`StackedGrid.with_observations`):
-        a new ``w*`` costs ``O(p m*^2)``.
+        a new ``w*`` costs ``O(p m*^2)``. So are the memos, shared with this
+        density: none of their pieces depends on ``w*`` (the simulator blocks on
+        ``lambda``, ``Q_t^T c`` on theta*, ``u`` and ``g`` on both, the overlaps
+        on ``Q_x``), so a sampler that moves an AR(1) coefficient, which changes
+        the observed weights alone, recomputes only the observed block.
         """
-        new = copy.copy(self)
+        new = copy.copy(self)  # through __getstate__: fresh memos, replaced below
         new._grid = self._grid.with_observations(w_star)
         new._data = new._grid.data
-        new._reset_memos()
+        for key in _MEMOS:
+            setattr(new, key, getattr(self, key))
         return new
 
     def pieces_grouped(

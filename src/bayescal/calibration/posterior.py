@@ -39,6 +39,7 @@ from bayescal.calibration.kron import Kind
 from bayescal.calibration.target import (
     LAMBDA_NAMES,
     CalibrationPosterior,
+    Moves,
     build_target,
     default_starts,
     sample,
@@ -327,6 +328,7 @@ def calibrate(
     checkpoint_dir: str | os.PathLike[str] | None = None,
     checkpoint_seconds: float = 30.0,
     observations: ObservationModel | None = None,
+    moves: Moves = "gibbs",
 ) -> Posterior:
     """Sample theta*, lambda and lambda* (eq. 16) with the hyperparameters at the MAP.
 
@@ -376,6 +378,9 @@ def calibrate(
         The outputs' error models (:mod:`bayescal.emulator.noise`: one
         ``lambda*`` per output, AR(1) errors); default: the paper's one white
         output with ``assembled.lam_star_prior``. NUTS needs one white output.
+    moves
+        ``"gibbs"`` (default) or ``"joint"``: how the ``"mwg"`` sweeps move the
+        coordinates after burn-in (:func:`bayescal.calibration.target.default_sampler`).
 
     Returns
     -------
@@ -432,6 +437,7 @@ def calibrate(
         checkpoint_dir=checkpoint_dir,
         checkpoint_seconds=checkpoint_seconds,
         starts=starts,
+        moves=moves,
     )
     draws = chains.draws
     t = target.t

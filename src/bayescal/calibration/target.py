@@ -22,7 +22,7 @@ from __future__ import annotations
 import math
 import os
 from collections.abc import Callable, Sequence
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -45,6 +45,7 @@ __all__ = [
     "LAMBDA_NAMES",
     "BatchedPosterior",
     "CalibrationPosterior",
+    "Moves",
     "build_target",
     "default_sampler",
     "default_starts",
@@ -53,6 +54,8 @@ __all__ = [
 ]
 
 LAMBDA_NAMES = ("lambda", "lambda_star")
+#: How a sweep moves the coordinates (:func:`default_sampler`).
+Moves = Literal["gibbs", "joint"]
 BoolArray = NDArray[np.bool_]
 
 
@@ -413,8 +416,20 @@ def emulator_algebra(
     )
 
 
-def default_sampler(target: CalibrationPosterior, n_burn: int) -> MetropolisWithinGibbs:
-    """Metropolis-within-Gibbs as ``calibrate`` configures it for ``target``."""
+def default_sampler(
+    target: CalibrationPosterior, n_burn: int, moves: Moves = "gibbs"
+) -> MetropolisWithinGibbs:
+    """Metropolis-within-Gibbs as ``calibrate`` configures it for ``target``.
+
+    ``moves = "gibbs"`` (default): every sweep moves each coordinate once, then
+    theta* jointly once. ``"joint"``: the joint block also holds every
+    ``lambda*``, ``phi`` and discrepancy ``r`` (for one white output, whose
+    sharply known ``lambda*`` keeps its own moves, theta* alone: the batched
+    likelihood moves theta* jointly only), its covariance is learnt during
+    burn-in, and after burn-in each sweep moves the block as many times as it
+    has coordinates instead of one at a time (``lambda``, uncorrelated with
+    the rest, keeps its own move). :mod:`bayescal.mcmc.samplers.mwg`.
+    """
     t, terms = target.t, target.prior_terms
     n_prec = 1 + terms.n_outputs
     lower = [0.0] * (t + n_prec) + [-PHI_MAX] * terms.n_phi + [DELTA_RANGE[0]] * terms.n_delta
@@ -431,6 +446,13 @@ def default_sampler(target: CalibrationPosterior, n_burn: int) -> MetropolisWith
     # theta* also moves jointly once per sweep: correlated parameters (a resistance
     # split, heat loss against solar gains) form ridges that one-coordinate steps crawl.
     joint = tuple(range(t)) if t >= 2 else ()
+    if moves not in ("gibbs", "joint"):
+        raise ConfigError(f"moves must be 'gibbs' or 'joint', got {moves!r}")
+    after = 0
+    if moves == "joint":
+        if not target.plain:
+            joint = tuple(range(t)) + tuple(range(t + 1, target.d))
+        after = len(joint)
     return MetropolisWithinGibbs(
         n_burn=n_burn,
         lower=lower,
@@ -439,6 +461,7 @@ def default_sampler(target: CalibrationPosterior, n_burn: int) -> MetropolisWith
         batch_size=25,
         max_adapt=0.25,
         joint=joint,
+        joint_after_burn=after,
     )
 
 
@@ -493,6 +516,7 @@ def sample(
     checkpoint_seconds: float = 30.0,
     starts: ArrayLike | None = None,
     sampler: Any = None,
+    moves: Moves = "gibbs",
 ) -> Chains:
     """Metropolis-within-Gibbs sweeps of ``target``, no diagnostics.
 
@@ -515,6 +539,9 @@ def sample(
         Starting points ``(n_chains, t + 2)``; default :func:`default_starts`.
     sampler
         Another sampler (default :func:`default_sampler`).
+    moves
+        ``"gibbs"`` or ``"joint"``: how :func:`default_sampler` moves the
+        coordinates (ignored with ``sampler``).
 
     Returns
     -------
@@ -523,7 +550,7 @@ def sample(
     """
     x0 = default_starts(target, n_chains, seed) if starts is None else starts
     return run_chains(
-        default_sampler(target, n_burn) if sampler is None else sampler,
+        default_sampler(target, n_burn, moves) if sampler is None else sampler,
         target,
         x0,
         n_draws,

@@ -15,6 +15,7 @@ order of ``obs_index``.
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -210,6 +211,15 @@ class GridData:
         if ws is not None and ws.shape != (idx.size, p):
             raise ValueError(f"expected w_star of shape ({idx.size}, {p}), got {ws.shape}")
         return cls(th, xx, ks, kk, ww, ws, idx)
+
+    def with_observations(self, w_star: ArrayLike) -> GridData:
+        """The same inputs with other observed weights ``(m_obs, p)`` (only they are checked)."""
+        ws = _matrix(w_star, "w_star")
+        if ws.shape != (self.obs_index.size, self.n_bases):
+            raise ValueError(
+                f"expected w_star of shape ({self.obs_index.size}, {self.n_bases}), got {ws.shape}"
+            )
+        return dataclasses.replace(self, w_star=ws)
 
     @property
     def n_bases(self) -> int:

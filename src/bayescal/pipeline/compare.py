@@ -265,6 +265,7 @@ def _score(
                 algebra=algebra,
                 draws_per_chain=draws_per_chain,
                 callback=tick,
+                moves=cal.moves,
             )
         finally:
             close()

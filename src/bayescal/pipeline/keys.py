@@ -94,10 +94,13 @@ def stage_keys(ctx: Context) -> dict[str, str]:
         s.outputs.calibration_dump(),
         dump["emulator"],
     )
+    calibration = dict(dump["calibration"])
+    if calibration.get("moves") == "gibbs":  # the default: the keys it had before the setting
+        del calibration["moves"]
     keys["calibrate"] = digest(
         "calibrate",
         keys["emulator"],
-        dump["calibration"],
+        calibration,
         *([dump["derived"]] if s.derived else []),
     )
     keys["discrepancy"] = digest("discrepancy", keys["calibrate"], dump["discrepancy"])

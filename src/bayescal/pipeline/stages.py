@@ -350,6 +350,7 @@ def calibrate_stage(
             checkpoint_dir=checkpoint_dir,
             checkpoint_seconds=ctx.options.checkpoint_seconds,
             observations=em.assembled.observations,
+            moves=section.moves,
         )
     finally:
         close()

@@ -102,9 +102,9 @@ class JointState:
         self.mean = self.mean + delta / self.n
         self.m2 = self.m2 + np.outer(delta, z_joint - self.mean)
 
-    def adapt(self, size: int, step: float, widths: FloatArray) -> None:
-        """After a burn-in batch of ``size`` sweeps: move ``g``, rebuild ``L``."""
-        self.log_g += step if self.accepted > JOINT_TARGET * size else -step
+    def adapt(self, moves: int, step: float, widths: FloatArray) -> None:
+        """After a burn-in batch of ``moves`` joint moves: move ``g``, rebuild ``L``."""
+        self.log_g += step if self.accepted > JOINT_TARGET * moves else -step
         k = widths.size
         if self.n >= min_samples(k):
             cov = self.m2 / (self.n - 1)
@@ -163,6 +163,26 @@ def restarting(n_done: int, n_burn: int) -> bool:
     return n_done == n_burn // 2
 
 
+def joint_only(n_done: int, n_burn: int, joint_after_burn: int) -> bool:
+    """Whether the sweep after ``n_done`` moves the block's coordinates only jointly.
+
+    With ``joint_after_burn = k > 0``, from the second estimation window of
+    burn-in on (:func:`restarting`): the window then learns the covariance from
+    the joint moves, which mix far better than one-coordinate steps where the
+    block is correlated, and the adaptation of ``g`` sees the kernel that is
+    kept after burn-in.
+    """
+    return joint_after_burn > 0 and n_done >= n_burn // 2
+
+
+def moves_in(n_done: int, size: int, n_burn: int, joint_after_burn: int) -> int:
+    """Joint moves made by the ``size`` sweeps after ``n_done``."""
+    if not joint_after_burn:
+        return size
+    only = max(0, n_done + size - max(n_done, n_burn // 2))
+    return size - only + only * joint_after_burn
+
+
 def propose(z_joint: FloatArray, chol: FloatArray, eps: FloatArray) -> FloatArray:
     """``z_J + L e`` (one chain)."""
     out: FloatArray = z_joint + chol @ eps
@@ -198,8 +218,10 @@ __all__ = [
     "JOINT_TARGET",
     "JointState",
     "collecting",
+    "joint_only",
     "log_ratio",
     "map_values",
     "min_samples",
+    "moves_in",
     "propose",
 ]

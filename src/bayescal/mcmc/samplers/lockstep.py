@@ -227,7 +227,7 @@ def run_lockstep(
     active = np.flatnonzero(~fixed_mask(sampler.fixed, x.shape[1])).tolist()
     joint = sampler.joint_indices(x.shape[1], active)
     maps = [box.scalar_map(i) for i in range(x.shape[1])]
-    loop = _Lockstep(target, maps, active, box, joint, sampler.n_burn)
+    loop = _Lockstep(target, maps, active, box, joint, sampler.n_burn, sampler.joint_after_burn)
     chains = _Chains(sampler, loop, list(rngs), callback)
 
     def start() -> None:
@@ -261,10 +261,15 @@ class _Chains:
     rngs: list[np.random.Generator]
     callback: Callback | None
     s: _States = field(init=False)
+    joint_only: bool = False  # whether the last block moved the joint block only jointly
+    joint_moves: int = 0  # the joint moves of the last block
 
     def block(
         self, size: int, n_done: int, keep_every: int, keep_start: int
     ) -> list[tuple[FloatArray, FloatArray]]:
+        n_burn, after = self.sampler.n_burn, self.sampler.joint_after_burn
+        self.joint_only = jm.joint_only(n_done + size - 1, n_burn, after)
+        self.joint_moves = jm.moves_in(n_done, size, n_burn, after)
         return self.loop.block(
             self.s, self.rngs, size, n_done, self.callback, keep_every, keep_start
         )
@@ -277,13 +282,15 @@ class _Chains:
     def adapt(self, size: int, n_batch: int) -> None:
         """Per chain and coordinate, the serial sampler's rule (same float operations)."""
         factor_up, factor_down = self.sampler.adaptation(n_batch)
-        active = self.loop.active
+        # coordinates that moved only jointly in this batch keep their widths
+        kept = set(self.loop.joint) if self.joint_only else set()
+        active = [i for i in self.loop.active if i not in kept]
         up = self.s.accepted[:, active] > self.sampler.target * size
         self.s.scale[:, active] *= np.where(up, factor_up, factor_down)
         if self.s.joint is not None:
             step = adaptation_step(n_batch, self.sampler.max_adapt)
             for k, js in enumerate(self.s.joint):
-                js.adapt(size, step, self.s.scale[k, self.loop.joint])
+                js.adapt(self.joint_moves, step, self.s.scale[k, self.loop.joint])
 
     def state(self) -> tuple[dict[str, Any], dict[str, Any]]:
         s = self.s
@@ -354,6 +361,9 @@ def _results(
     for k in range(s.x.shape[0]):
         acceptance = np.full(d, np.nan)
         acceptance[active] = s.accepted[k, active] / (n_draws * sampler.thin)
+        if sampler.joint_after_burn and s.joint:
+            moves = n_draws * sampler.thin * sampler.joint_after_burn
+            acceptance[joint] = s.joint[k].accepted / moves
         scales = np.zeros(d)
         scales[active] = s.scale[k, active]
         results.append(
@@ -403,6 +413,7 @@ class _Lockstep:
     box: Box
     joint: list[int]
     n_burn: int
+    joint_after_burn: int = 0
 
     def block(
         self,
@@ -422,15 +433,20 @@ class _Lockstep:
         log_u = np.stack([np.log1p(-rng.random((size, n_act))) for rng in rngs], axis=2)
         if self.joint:
             n_j = len(self.joint)
-            eps_j = np.stack([rng.standard_normal((size, n_j)) for rng in rngs], axis=1)
-            log_u_j = np.stack([np.log1p(-rng.random(size)) for rng in rngs], axis=1)
+            n_moves = max(1, self.joint_after_burn)
+            eps_j = np.stack([rng.standard_normal((size, n_moves, n_j)) for rng in rngs], axis=2)
+            log_u_j = np.stack([np.log1p(-rng.random((size, n_moves))) for rng in rngs], axis=2)
         n_chains = len(rngs)
         kept: list[tuple[FloatArray, FloatArray]] = []
+        inside = set(self.joint)
         for row in range(size):
+            only = jm.joint_only(n_done + row, self.n_burn, self.joint_after_burn)
             for k, i in enumerate(self.active):
-                self._update(s, i, eps[row, k], log_u[row, k])
+                if not (only and i in inside):
+                    self._update(s, i, eps[row, k], log_u[row, k])
             if self.joint:
-                self._joint_update(s, eps_j[row], log_u_j[row])
+                for move in range(self.joint_after_burn if only else 1):
+                    self._joint_update(s, eps_j[row, move], log_u_j[row, move])
                 if jm.collecting(n_done + row, self.n_burn):
                     for b, js in enumerate(s.joint or ()):
                         if jm.restarting(n_done + row, self.n_burn):
