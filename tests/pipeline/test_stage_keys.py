@@ -74,3 +74,21 @@ def test_the_emulator_route_changes_only_the_predict_key_and_after(tmp_path: Pat
     for stage in ("design", "simulate", "emulator", "calibrate", "discrepancy"):
         assert keys[stage] == WALL_KEYS[stage], stage
     assert keys["predict"] == EMULATOR_ROUTE_PREDICT_KEY
+
+
+def test_joint_moves_change_the_calibrate_key_and_after(tmp_path: Path) -> None:
+    """``[calibration] moves = "gibbs"`` (the default, written out or not) keeps the wall's
+    keys; ``"joint"`` draws other chains, so the calibration and every later stage
+    are computed anew."""
+    folder = copy_example("wall", tmp_path / "wall")
+    study = folder / "study.toml"
+    text = study.read_text(encoding="utf-8")
+    assert "[calibration]\n" in text
+    assert "moves" not in text
+    for moves, same in (("gibbs", True), ("joint", False)):
+        study.write_text(text.replace("[calibration]\n", f'[calibration]\nmoves = "{moves}"\n'))
+        keys = stage_keys(prepare(load_study(folder)))
+        for stage in ("design", "simulate", "emulator"):
+            assert keys[stage] == WALL_KEYS[stage], stage
+        for stage in ("calibrate", "discrepancy", "predict", "report"):
+            assert (keys[stage] == WALL_KEYS[stage]) is same, (moves, stage)
