@@ -301,3 +301,22 @@ def test_assemble_carries_each_outputs_error_model(
     assert a.observations.names() == ("lambda_star", "phi", "delta_rel")
     # the stated accuracy is the prior's centre, in standardised units
     assert o.prior[0] / o.prior[1] == pytest.approx((o.scale / 0.1) ** 2)
+
+
+@pytest.mark.parametrize("phi", [0.0, 0.3, 0.77, 0.95, -0.5])
+def test_gls_from_lag_sums_equals_prewhitening(phi: float) -> None:
+    """The GLS pieces from the lag sums equal those of prewhitened series (to rounding)."""
+    rng = np.random.default_rng(11)
+    n, p, m = 48, 5, 9
+    k = rng.normal(size=(n, p))
+    y = k @ rng.normal(size=(p, m)) + 0.3 * rng.normal(size=(n, m))
+    model = ObservationModel((OutputNoise("q", (0, n), tuple(range(p)), "ar1"),), k, y)
+    got = model.gls(0, phi)
+    kz, yz = ar1_whiten(k, phi), ar1_whiten(y, phi)
+    w = np.linalg.solve(kz.T @ kz, kz.T @ yz)
+    resid = yz - kz @ w
+    np.testing.assert_allclose(got.w_hat, w.T, rtol=1e-10, atol=1e-12)
+    np.testing.assert_allclose(got.h0_inv, np.linalg.inv(kz.T @ kz), rtol=1e-10, atol=1e-14)
+    assert got.quad0 == pytest.approx(float(np.sum(resid * resid)), rel=1e-10)
+    assert got.logdet_h0 == pytest.approx(np.linalg.slogdet(kz.T @ kz)[1], rel=1e-12)
+    assert got.logdet_r == pytest.approx(np.linalg.slogdet(_ar1_corr(n, phi))[1], abs=1e-10)

@@ -25,7 +25,6 @@ for bit.
 
 from __future__ import annotations
 
-import copy
 import dataclasses
 from dataclasses import dataclass
 from functools import cached_property
@@ -87,11 +86,11 @@ class BasisPieces:
         obs_full = np.zeros(d.x.shape[0])
         if obs.size == d.x.shape[0]:
             obs_full[d.obs_index] = obs
-        # a shallow copy with two fields set: dataclasses.replace re-runs __init__, which
-        # costs as much as the rest when an AR(1) coefficient's move asks for it
-        new = copy.copy(self)
-        object.__setattr__(new, "obs", obs)
-        object.__setattr__(new, "obs_rot", self.eig_x.vectors.T @ obs_full)
+        # a shallow copy with two fields set: dataclasses.replace re-runs __init__ and
+        # copy.copy goes through __reduce_ex__, each costing as much as the rest when an
+        # AR(1) coefficient's move asks for new observed weights
+        new = object.__new__(BasisPieces)
+        new.__dict__.update(self.__dict__, obs=obs, obs_rot=self.eig_x.vectors.T @ obs_full)
         return new
 
     @classmethod

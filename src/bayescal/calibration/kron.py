@@ -45,7 +45,6 @@ memos of what a Gibbs sweep leaves unchanged), :mod:`bayescal.calibration.batch`
 
 from __future__ import annotations
 
-import copy
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any, Literal, Protocol
@@ -72,8 +71,7 @@ from bayescal.emulator.kron import Lru, SymEig, positive_log_sum
 __all__ = ["CalibrationAlgebra", "Kind", "KronCalibrationDensity", "make_algebra"]
 
 Method = Literal["schur", "eigen"]
-#: The memo attributes of :class:`KronCalibrationDensity` (not pickled; shared by
-#: :meth:`KronCalibrationDensity.with_observations`).
+#: The memo attributes of :class:`KronCalibrationDensity` (not pickled).
 _MEMOS = ("_sim_memo", "_c_hat_memo", "_u_g_memo", "_overlaps", "_sims_memo")
 
 
@@ -403,11 +401,10 @@ class KronCalibrationDensity:
         on ``Q_x``), so a sampler that moves an AR(1) coefficient, which changes
         the observed weights alone, recomputes only the observed block.
         """
-        new = copy.copy(self)  # through __getstate__: fresh memos, replaced below
+        new = object.__new__(type(self))  # a shallow copy that shares the memos
+        new.__dict__.update(self.__dict__)
         new._grid = self._grid.with_observations(w_star)
         new._data = new._grid.data
-        for key in _MEMOS:
-            setattr(new, key, getattr(self, key))
         return new
 
     def pieces_grouped(

@@ -241,6 +241,61 @@ class GlsPieces:
 
 
 @dataclass(frozen=True)
+class _Lags:
+    """``A_z^T B_z`` of two prewhitened series as a function of ``phi``.
+
+    With ``z_1 = a_1`` and ``z_t = (a_t - phi a_{t-1}) / sqrt(1 - phi^2)``,
+    ``A_z^T B_z = F + (S_0 - phi S_1 + phi^2 S_2) / (1 - phi^2)`` where ``F`` is
+    the first samples' product and ``S_0, S_1, S_2`` the lag-0, symmetric lag-1
+    and shifted lag-0 sums over samples 2..n.
+    """
+
+    first: FloatArray
+    s0: FloatArray
+    s1: FloatArray
+    s2: FloatArray
+
+    @classmethod
+    def of(cls, a: FloatArray, b: FloatArray) -> _Lags:
+        """From series ``a`` ``(n, .)`` and ``b`` ``(n, .)`` along axis 0."""
+        return cls(
+            np.outer(a[0], b[0]),
+            a[1:].T @ b[1:],
+            a[1:].T @ b[:-1] + a[:-1].T @ b[1:],
+            a[:-1].T @ b[:-1],
+        )
+
+    def at(self, phi: float) -> FloatArray:
+        """``A_z^T B_z`` at ``phi``."""
+        out: FloatArray = self.first + (self.s0 - phi * self.s1 + phi * phi * self.s2) / (
+            1.0 - phi * phi
+        )
+        return out
+
+
+@dataclass(frozen=True)
+class _LagSums:
+    """What the GLS of one output needs at any ``phi`` (:meth:`ObservationModel.gls`)."""
+
+    kk: _Lags  # K^T R^-1 K (p_o, p_o)
+    ky: _Lags  # K^T R^-1 Y (p_o, m*)
+    yy: _Lags  # sum over the periods of y^T R^-1 y (1, 1)
+    n: int
+
+    @classmethod
+    def of(cls, ko: FloatArray, yo: FloatArray) -> _LagSums:
+        """From the output's basis ``(n_o, p_o)`` and periods ``(n_o, m*)``."""
+        y = yo.reshape(yo.shape[0], -1)
+        yy = _Lags(
+            np.array([[np.sum(y[0] * y[0])]]),
+            np.array([[np.sum(y[1:] * y[1:])]]),
+            np.array([[2.0 * np.sum(y[1:] * y[:-1])]]),
+            np.array([[np.sum(y[:-1] * y[:-1])]]),
+        )
+        return cls(_Lags.of(ko, ko), _Lags.of(ko, y), yy, ko.shape[0])
+
+
+@dataclass(frozen=True)
 class ObservationModel:
     """Every calibrated output's error model with the measured periods it applies to.
 
@@ -353,22 +408,39 @@ class ObservationModel:
     # ------------------------------------------------------------ AR(1) outputs
 
     def gls(self, q: int, phi: float) -> GlsPieces:
-        """Generalised least squares of output ``q`` under AR(1) errors with ``phi``."""
+        """Generalised least squares of output ``q`` under AR(1) errors with ``phi``.
+
+        From the lag sums of ``K_o`` and ``Y*_o`` (:class:`_LagSums`, computed once):
+        ``K_o^T R^-1 K_o``, ``K_o^T R^-1 Y*_o`` and the periods' ``y^T R^-1 y`` at any
+        ``phi`` in ``O(p_o^2 + p_o m*)``, the same as prewhitening (:func:`ar1_whiten`)
+        up to rounding; an AR(1) coefficient's move then costs no pass over the samples.
+        """
         if not abs(phi) < 1.0:
             raise ValueError(f"AR(1) coefficient must satisfy |phi| < 1, got {phi}")
-        ko, yo = self.block(q)
-        kz, yz = ar1_whiten(ko, phi), ar1_whiten(yo, phi)
-        h0 = kz.T @ kz
+        sums = self._lag_sums(q)
+        h0 = sums.kk.at(phi)
+        kty = sums.ky.at(phi)  # (p_o, m*)
         chol = linalg.cho_factor(h0, lower=True, check_finite=False)
-        w_hat = linalg.cho_solve(chol, kz.T @ yz, check_finite=False)  # (p_o, m*)
-        resid = yz - kz @ w_hat
+        w_hat = linalg.cho_solve(chol, kty, check_finite=False)  # (p_o, m*)
+        # y^T R^-1 y - (K^T R^-1 y)^T w: the whitened residuals' sum of squares
+        quad0 = sums.yy.at(phi).item() - float(np.vdot(kty, w_hat))
         return GlsPieces(
             w_hat=np.ascontiguousarray(w_hat.T),
             h0_inv=linalg.cho_solve(chol, np.eye(h0.shape[0]), check_finite=False),
-            logdet_r=(ko.shape[0] - 1) * math.log1p(-phi * phi),
+            logdet_r=(sums.n - 1) * math.log1p(-phi * phi),
             logdet_h0=2.0 * float(np.sum(np.log(np.diag(chol[0])))),
-            quad0=float(np.sum(resid * resid)),
+            quad0=max(quad0, 0.0),
         )
+
+    def _lag_sums(self, q: int) -> _LagSums:
+        """The lag sums of output ``q`` (computed on first use, kept)."""
+        cache: dict[int, _LagSums] = self.__dict__.setdefault("_lag_sums_cache", {})
+        found = cache.get(q)
+        if found is None:
+            ko, yo = self.block(q)
+            found = _LagSums.of(ko, yo)
+            cache[q] = found
+        return found
 
     def weights_of(self, q: int, y: FloatArray, phi: float = 0.0) -> FloatArray:
         """The observed-weight estimate of output ``q`` applied to other periods ``y``.
