@@ -8,7 +8,8 @@
 * On the small virtual wall with AR(1) errors, calibrations with ``"joint"`` and
   ``"gibbs"`` moves agree: every coordinate's posterior mean within 4 combined
   Monte Carlo standard errors (ArviZ), and the joint calibration passes its
-  diagnostics (marked slow).
+  diagnostics (marked slow); with one white output, lockstep chains take the draws
+  of serial ones.
 """
 
 from __future__ import annotations
@@ -85,3 +86,19 @@ def test_joint_and_gibbs_moves_sample_the_same_posterior(small_wall: Wall) -> No
         se = math.hypot(*(float(az.mcse(v, method="mean")) for v in values.values()))
         diff = float(np.mean(values["joint"]) - np.mean(values["gibbs"]))
         assert abs(diff) < N_SE * se, (name, diff, se)
+
+
+def test_joint_moves_of_one_white_output_are_the_same_in_lockstep(small_wall: Wall) -> None:
+    """The batched likelihood's session moves theta* jointly several times a sweep: its
+    chains take the draws of serial ones."""
+    _, a, em = small_wall
+    posts = [
+        calibrate(em, a, n_chains=4, n_burn=200, n_draws=300, seed=1, backend=b, moves="joint")
+        for b in ("serial", "vectorised")
+    ]
+    np.testing.assert_array_equal(posts[0].unit_draws, posts[1].unit_draws)
+    np.testing.assert_array_equal(posts[0].aux, posts[1].aux)
+    t = len(a.parameter_names)
+    for row in posts[1].acceptance:  # theta* shares the joint move's rate
+        assert np.all(row[:t] == row[0])
+        assert 0.05 < row[0] < 0.6

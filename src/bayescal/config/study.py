@@ -255,16 +255,15 @@ class CalibrationSection(Section):
         default="mwg",
     )
     moves: Literal["gibbs", "joint"] = field_doc(
-        "How sampler 'mwg' moves the coordinates after burn-in. 'gibbs' (the default): "
-        "every sweep moves each coordinate once, then the parameters jointly once. "
-        "'joint': the parameters, the noise precisions lambda* and the AR(1) "
-        "coefficients move together, with the covariance learnt during burn-in, as many "
-        "times per sweep as they are (one white output keeps its lambda* moves apart); "
-        "nothing else moves one at a time but lambda. Where they are correlated this "
-        "mixes far better per likelihood evaluation (Twin House: 7-9x the smallest "
-        "bulk ESS per evaluation after burn-in, docs/benchmarks.md); burn-in must be "
-        "long enough to learn the covariance (its second half estimates it: give it "
-        ">= 500 sweeps).",
+        "How sampler 'mwg' moves the coordinates. 'gibbs' (the default): every sweep "
+        "moves each coordinate once, then the parameters jointly once. 'joint': from "
+        "halfway through burn-in the parameters, the noise precisions lambda* and the "
+        "AR(1) coefficients move only together, with the covariance learnt from these "
+        "moves, as many times per sweep as they are (one white output keeps its own "
+        "lambda* moves, and lambda always does). Where they are correlated this mixes "
+        "far better per likelihood evaluation (Twin House: 7-8x the smallest bulk ESS "
+        "per evaluation after burn-in, docs/benchmarks.md); burn-in must be long enough "
+        "to learn the covariance (give it >= 500 sweeps).",
         "joint",
         default="gibbs",
     )

@@ -177,10 +177,10 @@ def joint_only(n_done: int, n_burn: int, joint_after_burn: int) -> bool:
 
 def moves_in(n_done: int, size: int, n_burn: int, joint_after_burn: int) -> int:
     """Joint moves made by the ``size`` sweeps after ``n_done``."""
-    if not joint_after_burn:
-        return size
-    only = max(0, n_done + size - max(n_done, n_burn // 2))
-    return size - only + only * joint_after_burn
+    return sum(
+        joint_after_burn if joint_only(n, n_burn, joint_after_burn) else 1
+        for n in range(n_done, n_done + size)
+    )
 
 
 def propose(z_joint: FloatArray, chol: FloatArray, eps: FloatArray) -> FloatArray:

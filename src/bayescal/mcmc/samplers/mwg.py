@@ -25,7 +25,7 @@ covariance and the scale ``g`` from these joint moves
 (:func:`~bayescal.mcmc.samplers.joint.joint_only`). Where the block's
 coordinates are correlated this mixes far better per evaluation: on the Twin
 House calibration (seven coordinates, correlations up to 0.86) the smallest
-bulk ESS per log-density evaluation after burn-in was 7-9x the Gibbs sweeps'
+bulk ESS per log-density evaluation after burn-in was 7-8x the Gibbs sweeps'
 (docs/benchmarks.md).
 
 Bounded coordinates are sampled on a transformed scale or reflected at the
