@@ -255,15 +255,10 @@ class CalibrationSection(Section):
         default="mwg",
     )
     moves: Literal["gibbs", "joint"] = field_doc(
-        "How sampler 'mwg' moves the coordinates. 'gibbs' (the default): every sweep "
-        "moves each coordinate once, then the parameters jointly once. 'joint': from "
-        "halfway through burn-in the parameters, the noise precisions lambda* and the "
-        "AR(1) coefficients move only together, with the covariance learnt from these "
-        "moves, as many times per sweep as they are (one white output keeps its own "
-        "lambda* moves, and lambda always does). Where they are correlated this mixes "
-        "far better per likelihood evaluation (Twin House: 7-8x the smallest bulk ESS "
-        "per evaluation after burn-in, docs/benchmarks.md); burn-in must be long enough "
-        "to learn the covariance (give it >= 500 sweeps).",
+        "'gibbs': each coordinate moves alone, then the parameters jointly, every sweep. "
+        "'joint': from halfway through burn-in the parameters, lambda* and AR(1) phi move "
+        "only together (lambda and one white output's lambda* apart), with the covariance "
+        "learnt from these moves: Twin House 7-8x the ESS per evaluation; burn >= 500.",
         "joint",
         default="gibbs",
     )
