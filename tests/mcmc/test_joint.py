@@ -129,20 +129,34 @@ def test_one_chain_and_lockstep_take_the_same_draws() -> None:
         np.testing.assert_array_equal(got.proposal_cov, want.proposal_cov)
 
 
+def _check_resume(
+    sampler: MetropolisWithinGibbs,
+    target: type[Counted],
+    starts: NDArray[np.float64],
+    seed: int,
+    backend: str,
+    limit: int,
+    folder: Path,
+) -> None:
+    """A run killed after ``limit`` calls resumes from its snapshots with the draws of
+    an uninterrupted one."""
+
+    def go(counted: Counted, where: Path | None) -> NDArray[np.float64]:
+        return run_chains(
+            sampler, counted, starts, 200, seed=seed, backend=backend,  # type: ignore[arg-type]
+            checkpoint_dir=where, checkpoint_seconds=0.0,
+        ).draws  # fmt: skip
+
+    reference = go(target(), None)
+    with pytest.raises(Killed):
+        go(target(limit=limit), folder)
+    np.testing.assert_array_equal(go(target(), folder), reference)
+
+
 @pytest.mark.parametrize("backend", ["serial", "vectorised"])
 def test_killed_joint_run_resumes_identically(tmp_path: Path, backend: str) -> None:
     sampler = _sampler((0, 1), n_burn=200)
-
-    def go(target: Counted, folder: Path | None) -> NDArray[np.float64]:
-        return run_chains(
-            sampler, target, STARTS[:2], 200, seed=3, backend=backend,  # type: ignore[arg-type]
-            checkpoint_dir=folder, checkpoint_seconds=0.0,
-        ).draws  # fmt: skip
-
-    reference = go(Counted(), None)
-    with pytest.raises(Killed):
-        go(Counted(limit=500), tmp_path)
-    np.testing.assert_array_equal(go(Counted(), tmp_path), reference)
+    _check_resume(sampler, Counted, STARTS[:2], 3, backend, 500, tmp_path)
 
 
 def test_joint_needs_two_free_coordinates_and_the_transform() -> None:
@@ -226,23 +240,12 @@ def test_joint_moves_only_after_burn_in_are_the_same_in_lockstep() -> None:
 
 @pytest.mark.parametrize("backend", ["serial", "vectorised"])
 def test_killed_run_with_joint_moves_only_resumes_identically(tmp_path: Path, backend: str) -> None:
-    sampler = _after(2, n_burn=100)
-
-    def go(target: Ridge3, folder: Path | None) -> NDArray[np.float64]:
-        return run_chains(
-            sampler, target, STARTS_3[:2], 200, seed=8, backend=backend,  # type: ignore[arg-type]
-            checkpoint_dir=folder, checkpoint_seconds=0.0,
-        ).draws  # fmt: skip
-
-    reference = go(Ridge3(), None)
     # killed 120 sweeps after burn-in (a chain's evaluations: 4 a sweep in the first half
     # of burn-in, 3 after; serial chains run one after the other: in the second chain)
     per_chain = 50 * 4 + (50 + 200) * 3
     killed_at = 50 * 4 + (50 + 120) * 3
     limit = per_chain + killed_at if backend == "serial" else killed_at
-    with pytest.raises(Killed):
-        go(Ridge3(limit=limit), tmp_path)
-    np.testing.assert_array_equal(go(Ridge3(), tmp_path), reference)
+    _check_resume(_after(2, n_burn=100), Ridge3, STARTS_3[:2], 8, backend, limit, tmp_path)
 
 
 def test_joint_moves_only_after_burn_in_need_a_joint_block() -> None:
