@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from bayescal.calibration.identifiability import identifiability
+from bayescal.calibration.identifiability import identifiability, moves_hint
 from bayescal.calibration.posterior import Posterior
 from bayescal.design import UniformPrior
 
@@ -60,3 +60,33 @@ def test_independent_sharp_and_flat_parameters() -> None:
     assert ident.contraction[0] > 0.99
     assert abs(ident.contraction[1]) < 0.05  # Monte Carlo error of a variance ratio
     assert "unidentified: +1.00 b" in ident.lines()[1]
+
+
+def _random_walk(rng: np.random.Generator, n: int, step: float) -> np.ndarray:
+    """A slowly mixing chain: a reflected random walk in [0.55, 1.95]."""
+    x = 1.25 + np.cumsum(rng.normal(0.0, step, n))
+    return 1.25 + 0.7 * np.sin((x - 1.25) / 0.7 * np.pi / 2)
+
+
+def test_moves_hint_names_the_correlated_pair_of_a_slow_calibration() -> None:
+    priors = {"k_a": UniformPrior(0.5, 2.0), "k_b": UniformPrior(0.5, 2.0)}
+    rng = np.random.default_rng(3)
+    # slow chains along a ridge k_a k_b = 1.5 (correlation -1 on the log scale)
+    k_a = np.stack([_random_walk(rng, 500, 0.01) for _ in range(4)])
+    k_b = 1.5 / k_a * np.exp(rng.normal(0.0, 0.01, k_a.shape))
+    slow = _posterior(np.stack([k_a, k_b], axis=-1), priors)
+    assert slow.warnings  # R-hat and ESS fail
+    hint = moves_hint(slow)
+    assert hint is not None
+    assert hint.startswith("k_a and k_b are correlated in the posterior (-0.9")
+    assert 'moves = "joint"' in hint
+    # the same slow chains without the ridge: no hint (the moves are not to blame)
+    k_c = np.stack([_random_walk(rng, 500, 0.01) for _ in range(4)])
+    apart = _posterior(np.stack([k_a, k_c], axis=-1), priors)
+    assert apart.warnings
+    assert moves_hint(apart) is None
+    # a well-mixed ridge: no hint either (nothing failed)
+    k_a = rng.uniform(0.8, 1.8, (4, 2000))
+    mixed = _posterior(np.stack([k_a, 1.5 / k_a], axis=-1), priors)
+    assert not mixed.warnings
+    assert moves_hint(mixed) is None

@@ -32,6 +32,10 @@ from numpy.typing import ArrayLike, NDArray
 from bayescal.errors import ConfigError
 from bayescal.mcmc.chains import Chains
 
+#: The thresholds :func:`diagnose` judges by default (Vehtari et al. 2021).
+RHAT_MAX = 1.01
+ESS_MIN = 400.0
+
 if TYPE_CHECKING:
     import pandas as pd
     from arviz import InferenceData
@@ -195,8 +199,8 @@ def diagnose(
     names: Sequence[str] | None = None,
     acceptance: ArrayLike | None = None,
     *,
-    rhat_max: float = 1.01,
-    ess_min: float = 400.0,
+    rhat_max: float = RHAT_MAX,
+    ess_min: float = ESS_MIN,
     min_acceptance: float = 0.01,
     min_chains: int = 4,
 ) -> Diagnostics:

@@ -29,6 +29,7 @@ from typing import Any
 import numpy as np
 
 from bayescal.atomic import read_npz
+from bayescal.calibration.identifiability import moves_hint
 from bayescal.calibration.posterior import Posterior
 from bayescal.config import Study
 from bayescal.design import Design
@@ -339,8 +340,18 @@ def _calibration(r: _Runner, em: EmulatorResult) -> Posterior:
     for w in post.warnings:
         r.logger.warning("calibration: %s", w)
         r.say(f"warning: {w}")
+    hint = moves_hint(post) if _gibbs_moves(r.ctx.study) else None
+    if hint is not None:
+        r.logger.warning("calibration: %s", hint)
+        r.say(f"hint: {hint}")
     r.finish("calibrate", [posterior_store.FILE, posterior_store.SUMMARY_FILE], start)
     return post
+
+
+def _gibbs_moves(study: Study) -> bool:
+    """Whether the calibration moved its coordinates one at a time (``moves = "gibbs"``)."""
+    cal = study.calibration
+    return cal.sampler == "mwg" and cal.moves == "gibbs"
 
 
 def _discrepancy(r: _Runner, em: EmulatorResult, post: Posterior) -> Discrepancy | None:
