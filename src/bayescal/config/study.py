@@ -257,8 +257,8 @@ class CalibrationSection(Section):
     moves: Literal["gibbs", "joint"] = field_doc(
         "'gibbs': each coordinate moves alone, then the parameters jointly, every sweep. "
         "'joint': from halfway through burn-in the parameters, lambda* and AR(1) phi move "
-        "only together (lambda and one white output's lambda* apart), with the covariance "
-        "learnt from these moves: Twin House 7-8x the ESS per evaluation; burn >= 500.",
+        "only together (lambda, one white output's lambda* apart), covariance learnt from "
+        "them: Twin House 7-8x the ESS per evaluation, an office of 16 worse; check it.",
         "joint",
         default="gibbs",
     )
