@@ -207,18 +207,12 @@ class GridData:
             raise ValueError(f"obs_index must hold distinct period indices, got {idx.tolist()}")
         if idx.size and idx.max() >= xx.shape[0]:
             raise ValueError(f"obs_index {idx.max()} out of range for {xx.shape[0]} periods")
-        ws = None if w_star is None else _matrix(w_star, "w_star")
-        if ws is not None and ws.shape != (idx.size, p):
-            raise ValueError(f"expected w_star of shape ({idx.size}, {p}), got {ws.shape}")
+        ws = None if w_star is None else _observed_weights(w_star, idx.size, p)
         return cls(th, xx, ks, kk, ww, ws, idx)
 
     def with_observations(self, w_star: ArrayLike) -> GridData:
         """The same inputs with other observed weights ``(m_obs, p)`` (only they are checked)."""
-        ws = _matrix(w_star, "w_star")
-        if ws.shape != (self.obs_index.size, self.n_bases):
-            raise ValueError(
-                f"expected w_star of shape ({self.obs_index.size}, {self.n_bases}), got {ws.shape}"
-            )
+        ws = _observed_weights(w_star, self.obs_index.size, self.n_bases)
         return dataclasses.replace(self, w_star=ws)
 
     @property
@@ -239,6 +233,14 @@ class GridData:
         """
         lam_s = np.broadcast_to(np.asarray(lam_star, dtype=float), self.obs_index.shape)
         return 1.0 / (float(lam) * self.ktk), 1.0 / np.outer(self.ktk, lam_s)
+
+
+def _observed_weights(w_star: ArrayLike, m_obs: int, p: int) -> FloatArray:
+    """``w_star`` checked: finite, shape ``(m_obs, p)``."""
+    ws = _matrix(w_star, "w_star")
+    if ws.shape != (m_obs, p):
+        raise ValueError(f"expected w_star of shape ({m_obs}, {p}), got {ws.shape}")
+    return ws
 
 
 def _matrix(value: ArrayLike, name: str) -> FloatArray:

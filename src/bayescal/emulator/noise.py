@@ -345,6 +345,11 @@ class ObservationModel:
         """Indices of the outputs with a model discrepancy (one ``r`` coordinate each)."""
         return tuple(q for q, o in enumerate(self.outputs) if o.discrepancy)
 
+    @cached_property
+    def _lag_sums(self) -> dict[int, _LagSums]:
+        """The lag sums of each output :meth:`gls` has seen (filled on first use)."""
+        return {}
+
     @property
     def coupled(self) -> bool:
         """Whether some output's observed weights are coupled (AR(1) errors)."""
@@ -417,7 +422,9 @@ class ObservationModel:
         """
         if not abs(phi) < 1.0:
             raise ValueError(f"AR(1) coefficient must satisfy |phi| < 1, got {phi}")
-        sums = self._lag_sums(q)
+        sums = self._lag_sums.get(q)
+        if sums is None:
+            sums = self._lag_sums[q] = _LagSums.of(*self.block(q))
         h0 = sums.kk.at(phi)
         kty = sums.ky.at(phi)  # (p_o, m*)
         chol = linalg.cho_factor(h0, lower=True, check_finite=False)
@@ -431,16 +438,6 @@ class ObservationModel:
             logdet_h0=2.0 * float(np.sum(np.log(np.diag(chol[0])))),
             quad0=max(quad0, 0.0),
         )
-
-    def _lag_sums(self, q: int) -> _LagSums:
-        """The lag sums of output ``q`` (computed on first use, kept)."""
-        cache: dict[int, _LagSums] = self.__dict__.setdefault("_lag_sums_cache", {})
-        found = cache.get(q)
-        if found is None:
-            ko, yo = self.block(q)
-            found = _LagSums.of(ko, yo)
-            cache[q] = found
-        return found
 
     def weights_of(self, q: int, y: FloatArray, phi: float = 0.0) -> FloatArray:
         """The observed-weight estimate of output ``q`` applied to other periods ``y``.

@@ -175,12 +175,15 @@ def joint_only(n_done: int, n_burn: int, joint_after_burn: int) -> bool:
     return joint_after_burn > 0 and n_done >= n_burn // 2
 
 
-def moves_in(n_done: int, size: int, n_burn: int, joint_after_burn: int) -> int:
-    """Joint moves made by the ``size`` sweeps after ``n_done``."""
-    return sum(
+def batch_moves(n_done: int, size: int, n_burn: int, joint_after_burn: int) -> tuple[bool, int]:
+    """Of the ``size`` sweeps after ``n_done``: whether the last moves the block only
+    jointly (its coordinates' own widths then stay as they are) and the joint moves
+    made in all (what the adaptation of ``g`` counts acceptances against)."""
+    moves = sum(
         joint_after_burn if joint_only(n, n_burn, joint_after_burn) else 1
         for n in range(n_done, n_done + size)
     )
+    return joint_only(n_done + size - 1, n_burn, joint_after_burn), moves
 
 
 def propose(z_joint: FloatArray, chol: FloatArray, eps: FloatArray) -> FloatArray:
@@ -217,11 +220,11 @@ def map_values(
 __all__ = [
     "JOINT_TARGET",
     "JointState",
+    "batch_moves",
     "collecting",
     "joint_only",
     "log_ratio",
     "map_values",
     "min_samples",
-    "moves_in",
     "propose",
 ]

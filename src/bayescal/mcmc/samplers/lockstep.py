@@ -267,9 +267,9 @@ class _Chains:
     def block(
         self, size: int, n_done: int, keep_every: int, keep_start: int
     ) -> list[tuple[FloatArray, FloatArray]]:
-        n_burn, after = self.sampler.n_burn, self.sampler.joint_after_burn
-        self.joint_only = jm.joint_only(n_done + size - 1, n_burn, after)
-        self.joint_moves = jm.moves_in(n_done, size, n_burn, after)
+        self.joint_only, self.joint_moves = jm.batch_moves(
+            n_done, size, self.sampler.n_burn, self.sampler.joint_after_burn
+        )
         return self.loop.block(
             self.s, self.rngs, size, n_done, self.callback, keep_every, keep_start
         )
