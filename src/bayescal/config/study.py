@@ -256,9 +256,9 @@ class CalibrationSection(Section):
     )
     moves: Literal["gibbs", "joint"] = field_doc(
         "'gibbs': each coordinate moves alone, then the parameters jointly, every sweep. "
-        "'joint': from halfway through burn-in the parameters, lambda* and AR(1) phi move "
-        "only together (lambda, one white output's lambda* apart), covariance learnt from "
-        "them: Twin House 7-8x the ESS per evaluation, an office of 16 worse; check it.",
+        "'joint': from mid burn-in the parameters, lambda* and AR(1) phi move only together "
+        "(covariance learnt from them; proposals screened by a stand-in: delayed acceptance)"
+        ": Twin House 7-8x the ESS per evaluation, fewer evaluations; office worse: check.",
         "joint",
         default="gibbs",
     )

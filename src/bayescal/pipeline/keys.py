@@ -97,6 +97,8 @@ def stage_keys(ctx: Context) -> dict[str, str]:
     calibration = dict(dump["calibration"])
     if calibration.get("moves") == "gibbs":  # the default: the keys it had before the setting
         del calibration["moves"]
+    elif calibration.get("moves") == "joint":  # screened joint moves draw other chains
+        calibration["moves"] = "joint, screened"
     keys["calibrate"] = digest(
         "calibrate",
         keys["emulator"],

@@ -102,6 +102,10 @@ class SamplerResult:
     proposal_cov
         Final proposal covariance of a block sampler on the sampling scale,
         ``(d, d)``, zero rows/columns for fixed coordinates; ``None`` otherwise.
+    screened
+        Share of the joint proposals after burn-in that the screen turned down
+        without evaluating the log-density (delayed acceptance); ``None`` without
+        a screen.
     """
 
     draws: NDArray[np.float64]
@@ -112,6 +116,7 @@ class SamplerResult:
     n_burn: int
     thin: int
     proposal_cov: NDArray[np.float64] | None = None
+    screened: float | None = None
 
     @property
     def n_draws(self) -> int:

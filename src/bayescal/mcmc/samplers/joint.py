@@ -27,9 +27,30 @@ of Metropolis kernels that each leave the target invariant).
 The same functions serve one chain (:mod:`.mwg`) and chains in lockstep
 (:mod:`.lockstep`), so that both take the same float operations and draws.
 
+With ``screen`` (delayed acceptance, Christen & Fox 2005) a joint proposal is
+first tested against a cheap stand-in ``q`` of the block's posterior on the
+sampling scale: it goes on with probability ``min(1, q(z_J') / q(z_J))``, and
+only then is the log-density evaluated and the proposal accepted with
+probability ``min(1, pi(z') q(z_J) / (pi(z) q(z_J')))``. The two stages
+together leave the target invariant whatever ``q`` is (a poor stand-in costs
+mixing, never exactness); where ``q`` is close to the block's posterior, most
+proposals that would be rejected are turned down without an evaluation. ``q``
+is a Student-t with 4 degrees of freedom around the current window's mean
+``m``, its scale matrix ``1.5^2 C``. Both choices keep ``q``'s tails heavier
+than the target's: where ``pi / q`` grows into a tail, a chain that gets there
+stays (every way back is turned down at the second stage), as an independence
+sampler with a light-tailed proposal does. On the Twin House calibration a
+Gaussian ``N(m, C)`` did exactly that (bulk ESS 37, R-hat 1.08 where the
+unscreened chains reach 808): a burn-in window's ``C`` comes out narrower than
+the posterior (there, 30 % narrower SDs). The screen is used once the current
+window holds ``min_samples`` sweeps; after burn-in ``m`` and ``C`` are frozen
+with the kernel.
+
 References: H. Haario, E. Saksman, J. Tamminen (2001), "An adaptive Metropolis
 algorithm", Bernoulli 7(2), 223-242; G. O. Roberts, A. Gelman, W. R. Gilks
-(1997), Ann. Appl. Probab. 7(1), 110-120.
+(1997), Ann. Appl. Probab. 7(1), 110-120; J. A. Christen, C. Fox (2005),
+"Markov chain Monte Carlo using an approximation", J. Comput. Graph. Stat.
+14(4), 795-810.
 """
 
 from __future__ import annotations
@@ -50,6 +71,10 @@ FloatArray = NDArray[np.float64]
 JOINT_TARGET = 0.234
 #: Haario's scaling of the proposal covariance, ``2.38^2 / |J|``.
 HAARIO = 2.38**2
+#: The screen's stand-in: a Student-t of ``SCREEN_DOF`` degrees of freedom around the
+#: window's mean with ``SCREEN_SCALE^2`` times the covariance estimate (module docstring).
+SCREEN_SCALE = 1.5
+SCREEN_DOF = 4.0
 
 
 def min_samples(n_joint: int) -> int:
@@ -73,6 +98,8 @@ class JointState:
         The last usable covariance estimate (zeros before the first).
     accepted
         Accepted joint moves since the last reset.
+    screened
+        Joint proposals the screen turned down since the last reset.
     """
 
     log_g: float
@@ -82,6 +109,7 @@ class JointState:
     chol: FloatArray
     cov: FloatArray
     accepted: int = 0
+    screened: int = 0
 
     @classmethod
     def start(cls, widths: FloatArray) -> JointState:
@@ -122,7 +150,7 @@ class JointState:
 
     def arrays(self, prefix: str = "joint_") -> dict[str, Any]:
         """The state as arrays for a snapshot."""
-        scalars = np.array([self.log_g, self.n, self.accepted], dtype=float)
+        scalars = np.array([self.log_g, self.n, self.accepted, self.screened], dtype=float)
         return {
             f"{prefix}scalars": scalars,
             f"{prefix}mean": self.mean,
@@ -134,7 +162,7 @@ class JointState:
     @classmethod
     def from_arrays(cls, arrays: dict[str, np.ndarray], prefix: str = "joint_") -> JointState:
         """The state written by :meth:`arrays`."""
-        log_g, n, accepted = np.asarray(arrays[f"{prefix}scalars"], dtype=float).tolist()
+        log_g, n, accepted, screened = np.asarray(arrays[f"{prefix}scalars"], dtype=float).tolist()
         return cls(
             float(log_g),
             int(n),
@@ -143,6 +171,7 @@ class JointState:
             np.array(arrays[f"{prefix}chol"], dtype=float),
             np.array(arrays[f"{prefix}cov"], dtype=float),
             int(accepted),
+            int(screened),
         )
 
 
@@ -186,6 +215,32 @@ def batch_moves(n_done: int, size: int, n_burn: int, joint_after_burn: int) -> t
     return joint_only(n_done + size - 1, n_burn, joint_after_burn), moves
 
 
+def screen_precision(js: JointState) -> FloatArray | None:
+    """The stand-in's precision ``C^-1`` (``None``: no estimate yet, or a singular one)."""
+    if not np.any(js.cov):
+        return None
+    try:
+        return np.asarray(np.linalg.inv(js.cov), dtype=float)
+    except np.linalg.LinAlgError:
+        return None
+
+
+def screen_ready(js: JointState) -> bool:
+    """Whether the current window's mean is estimated well enough to screen with."""
+    return js.n >= min_samples(js.mean.size)
+
+
+def screen_log_ratio(
+    z_new: FloatArray, z_old: FloatArray, mean: FloatArray, precision: FloatArray
+) -> float:
+    """``log q(z_new) - log q(z_old)`` of the stand-in ``q``: a Student-t (``SCREEN_DOF``)
+    around ``mean`` with scale matrix ``SCREEN_SCALE^2 precision^-1``."""
+    a, b = z_new - mean, z_old - mean
+    scale = SCREEN_SCALE**2 * SCREEN_DOF
+    qa, qb = float(a @ precision @ a) / scale, float(b @ precision @ b) / scale
+    return -0.5 * (SCREEN_DOF + mean.size) * (math.log1p(qa) - math.log1p(qb))
+
+
 def propose(z_joint: FloatArray, chol: FloatArray, eps: FloatArray) -> FloatArray:
     """``z_J + L e`` (one chain)."""
     out: FloatArray = z_joint + chol @ eps
@@ -227,4 +282,7 @@ __all__ = [
     "map_values",
     "min_samples",
     "propose",
+    "screen_log_ratio",
+    "screen_precision",
+    "screen_ready",
 ]

@@ -227,7 +227,9 @@ def run_lockstep(
     active = np.flatnonzero(~fixed_mask(sampler.fixed, x.shape[1])).tolist()
     joint = sampler.joint_indices(x.shape[1], active)
     maps = [box.scalar_map(i) for i in range(x.shape[1])]
-    loop = _Lockstep(target, maps, active, box, joint, sampler.n_burn, sampler.joint_after_burn)
+    loop = _Lockstep(
+        target, maps, active, box, joint, sampler.n_burn, sampler.joint_after_burn, sampler.screen
+    )
     chains = _Chains(sampler, loop, list(rngs), callback)
 
     def start() -> None:
@@ -277,7 +279,7 @@ class _Chains:
     def reset_counts(self) -> None:
         self.s.accepted[:] = 0
         for js in self.s.joint or ():
-            js.accepted = 0
+            js.accepted = js.screened = 0
 
     def adapt(self, size: int, n_batch: int) -> None:
         """Per chain and coordinate, the serial sampler's rule (same float operations)."""
@@ -376,6 +378,12 @@ def _results(
                 n_burn=sampler.n_burn,
                 thin=sampler.thin,
                 proposal_cov=joint_covariance(s.joint[k] if s.joint else None, joint, d),
+                screened=(
+                    s.joint[k].screened
+                    / (n_draws * sampler.thin * max(1, sampler.joint_after_burn))
+                    if sampler.screen and s.joint
+                    else None
+                ),
             )
         )
     return results
@@ -414,6 +422,7 @@ class _Lockstep:
     joint: list[int]
     n_burn: int
     joint_after_burn: int = 0
+    screen: bool = False
 
     def block(
         self,
@@ -436,6 +445,12 @@ class _Lockstep:
             n_moves = max(1, self.joint_after_burn)
             eps_j = np.stack([rng.standard_normal((size, n_moves, n_j)) for rng in rngs], axis=2)
             log_u_j = np.stack([np.log1p(-rng.random((size, n_moves))) for rng in rngs], axis=2)
+            if self.screen:
+                log_u_screen = np.stack(
+                    [np.log1p(-rng.random((size, n_moves))) for rng in rngs], axis=2
+                )
+                assert s.joint is not None
+                precisions = [jm.screen_precision(js) for js in s.joint]
         n_chains = len(rngs)
         kept: list[tuple[FloatArray, FloatArray]] = []
         inside = set(self.joint)
@@ -445,8 +460,22 @@ class _Lockstep:
                 if not (only and i in inside):
                     self._update(s, i, eps[row, k], log_u[row, k])
             if self.joint:
+                screens: list[tuple[FloatArray, float] | None] = [None] * n_chains
+                if self.screen:
+                    assert s.joint is not None
+                    ready = [
+                        p is not None and jm.screen_ready(js)
+                        for p, js in zip(precisions, s.joint, strict=True)
+                    ]
                 for move in range(self.joint_after_burn if only else 1):
-                    self._joint_update(s, eps_j[row, move], log_u_j[row, move])
+                    if self.screen:
+                        screens = [
+                            (p, float(log_u_screen[row, move, b]))
+                            if ready[b] and p is not None
+                            else None
+                            for b, p in enumerate(precisions)
+                        ]
+                    self._joint_update(s, eps_j[row, move], log_u_j[row, move], screens)
                 if jm.collecting(n_done + row, self.n_burn):
                     for b, js in enumerate(s.joint or ()):
                         if jm.restarting(n_done + row, self.n_burn):
@@ -491,8 +520,18 @@ class _Lockstep:
         s.accepted[:, i] += accept
         s.x[:, i] = np.where(accept, x_new, old)
 
-    def _joint_update(self, s: _States, eps: FloatArray, log_u: FloatArray) -> None:
-        """One Metropolis update of the joint block in every chain (as the serial sampler)."""
+    def _joint_update(
+        self,
+        s: _States,
+        eps: FloatArray,
+        log_u: FloatArray,
+        screens: Sequence[tuple[FloatArray, float] | None],
+    ) -> None:
+        """One Metropolis update of the joint block in every chain (as the serial sampler).
+
+        A chain whose proposal the stand-in turns down (``screens``, delayed acceptance)
+        is scored at its current point and rejected: the draws are the serial ones, the
+        saved evaluations are the serial sampler's only."""
         joint, states = self.joint, s.joint
         assert states is not None
         n_chains = s.x.shape[0]
@@ -500,9 +539,16 @@ class _Lockstep:
         jacobians: list[list[float]] = []
         z_new = np.empty((n_chains, len(joint)))
         ok = np.ones(n_chains, dtype=bool)
+        screened = np.zeros(n_chains)
         for b, js in enumerate(states):
             z_new[b] = jm.propose(s.z[b, joint], js.chol, eps[b])
             mapped = jm.map_values(self.maps, joint, z_new[b])
+            screen = screens[b]
+            if mapped is not None and screen is not None:
+                screened[b] = jm.screen_log_ratio(z_new[b], s.z[b, joint], js.mean, screen[0])
+                if not screen[1] < screened[b]:
+                    js.screened += 1
+                    mapped = None
             if mapped is None:
                 ok[b] = False
                 jacobians.append([])
@@ -520,7 +566,7 @@ class _Lockstep:
             if ok[b]:
                 lj_old = s.log_jac[b, joint].tolist()
                 ratio = jm.log_ratio(float(lp_new[b]), jacobians[b], float(s.lp[b]), lj_old)
-                accept[b] = bool(log_u[b] < ratio)
+                accept[b] = bool(log_u[b] < ratio - float(screened[b]))
         self.target.commit(accept)
         for b in np.flatnonzero(accept).tolist():
             s.lp[b] = lp_new[b]

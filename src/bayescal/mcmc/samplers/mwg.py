@@ -124,6 +124,13 @@ class MetropolisWithinGibbs:
         moves its coordinates one at a time (the covariance learnt from these
         moves in the second half of burn-in does the work; a fixed kernel after
         burn-in, as before). Needs ``joint``.
+    screen
+        Delayed acceptance of the joint moves: each proposal is first tested
+        against a Gaussian stand-in of the block learnt during burn-in, and the
+        log-density is evaluated only for those that pass
+        (:mod:`~bayescal.mcmc.samplers.joint`). Same target, fewer evaluations
+        where the block's posterior is close to Gaussian on the sampling scale.
+        Needs ``joint``; draws one more uniform per joint move.
     """
 
     n_burn: int = 2000
@@ -138,6 +145,7 @@ class MetropolisWithinGibbs:
     max_adapt: float = 0.01
     joint: tuple[int, ...] = ()
     joint_after_burn: int = 0
+    screen: bool = False
 
     def __post_init__(self) -> None:
         check_run_args(1, self.n_burn, self.thin)
@@ -159,6 +167,8 @@ class MetropolisWithinGibbs:
         object.__setattr__(self, "joint_after_burn", int(self.joint_after_burn))
         if self.joint_after_burn and not self.joint:
             raise ConfigError("joint_after_burn needs a joint block (joint=...)")
+        if self.screen and not self.joint:
+            raise ConfigError("screen needs a joint block (joint=...)")
 
     def joint_indices(self, d: int, active: Sequence[int]) -> list[int]:
         """The joint block checked against ``d`` coordinates and the free ones."""
@@ -221,6 +231,7 @@ class MetropolisWithinGibbs:
             joint,
             self.n_burn,
             self.joint_after_burn,
+            self.screen,
         )
         chain = _Chain(self, loop, rng, active)
         fp = fingerprint(self, x, n_draws, rng_state)
@@ -235,6 +246,10 @@ class MetropolisWithinGibbs:
         acceptance[active] = np.asarray(state.accepted, dtype=float)[active] / (n_draws * self.thin)
         if self.joint_after_burn and state.joint is not None:
             acceptance[joint] = state.joint.accepted / (n_draws * self.thin * self.joint_after_burn)
+        screened = None
+        if self.screen and state.joint is not None:
+            moves = n_draws * self.thin * max(1, self.joint_after_burn)
+            screened = state.joint.screened / moves
         scales = np.zeros(x.size)
         scales[active] = np.asarray(state.scale)[active]
         return SamplerResult(
@@ -246,6 +261,7 @@ class MetropolisWithinGibbs:
             n_burn=self.n_burn,
             thin=self.thin,
             proposal_cov=joint_covariance(state.joint, joint, x.size),
+            screened=screened,
         )
 
     def _initial_state(self, log_density: LogDensity, x: NDArray[np.float64], box: Box) -> _State:
@@ -293,7 +309,7 @@ class _Chain:
     def reset_counts(self) -> None:
         self.s.accepted = [0] * self.s.x.size
         if self.s.joint is not None:
-            self.s.joint.accepted = 0
+            self.s.joint.accepted = self.s.joint.screened = 0
 
     def adapt(self, size: int, n_batch: int) -> None:
         factor_up, factor_down = self.sampler.adaptation(n_batch)
@@ -346,6 +362,7 @@ class _Loop:
     joint: list[int]
     n_burn: int
     joint_after_burn: int = 0
+    screen: bool = False
 
     def block(
         self,
@@ -367,6 +384,11 @@ class _Loop:
             n_moves = max(1, self.joint_after_burn)
             eps_j = rng.standard_normal((size, n_moves, len(self.joint)))
             log_u_j = np.log1p(-rng.random((size, n_moves))).tolist()
+            precision = None
+            if self.screen:
+                log_u_screen = np.log1p(-rng.random((size, n_moves))).tolist()
+                assert s.joint is not None
+                precision = jm.screen_precision(s.joint)  # C changes between blocks only
         f_logp, maps, active, callback = self.log_density, self.maps, self.active, self.callback
         inside = set(self.joint)
         reflect = not self.transforms
@@ -403,8 +425,11 @@ class _Loop:
                     x[i] = old
             if self.joint:
                 s.lp = lp
+                assert s.joint is not None
+                ready = precision if self.screen and jm.screen_ready(s.joint) else None
                 for move in range(self.joint_after_burn if only else 1):
-                    self._joint_move(s, eps_j[row, move], log_u_j[row][move])
+                    screen = None if ready is None else (ready, log_u_screen[row][move])
+                    self._joint_move(s, eps_j[row, move], log_u_j[row][move], screen)
                 lp = s.lp
                 if jm.collecting(n_done + row, self.n_burn):
                     assert s.joint is not None
@@ -419,14 +444,28 @@ class _Loop:
         s.lp = lp
         return kept
 
-    def _joint_move(self, s: _State, eps: NDArray[np.float64], log_u: float) -> None:
-        """One Metropolis update of the joint block (:mod:`~bayescal.mcmc.samplers.joint`)."""
+    def _joint_move(
+        self,
+        s: _State,
+        eps: NDArray[np.float64],
+        log_u: float,
+        screen: tuple[NDArray[np.float64], float] | None = None,
+    ) -> None:
+        """One Metropolis update of the joint block (:mod:`~bayescal.mcmc.samplers.joint`);
+        with ``screen = (precision, log u)`` first the stand-in's test (delayed acceptance)."""
         js, joint, x, z, log_jac = s.joint, self.joint, s.x, s.z, s.log_jac
         assert js is not None
-        z_new = jm.propose(np.array([z[i] for i in joint]), js.chol, eps)
+        z_old = np.array([z[i] for i in joint])
+        z_new = jm.propose(z_old, js.chol, eps)
         mapped = jm.map_values(self.maps, joint, z_new)
         if mapped is None:
             return
+        screened = 0.0
+        if screen is not None:
+            screened = jm.screen_log_ratio(z_new, z_old, js.mean, screen[0])
+            if not screen[1] < screened:
+                js.screened += 1
+                return
         values, jacobians = mapped
         old = [x[i] for i in joint]
         for k, i in enumerate(joint):
@@ -434,7 +473,8 @@ class _Loop:
         lp_new = self.log_density(x)
         if not lp_new < _INF:
             check_log_density(lp_new, x)
-        if log_u < jm.log_ratio(lp_new, jacobians, s.lp, [log_jac[i] for i in joint]):
+        ratio = jm.log_ratio(lp_new, jacobians, s.lp, [log_jac[i] for i in joint])
+        if log_u < ratio - screened:
             s.lp = lp_new
             for k, i in enumerate(joint):
                 z[i] = float(z_new[k])
