@@ -58,13 +58,20 @@ def test_examples_validate_with_the_papers_set_up(case: str) -> None:
     assert np.isfinite(measured.outputs[output]).all()
 
 
-def _folder(case: str, tmp_path: Path) -> Path:
-    return reduced_box(case, tmp_path / case)
+def _folder(case: str, tmp_path: Path, moves: str = "gibbs") -> Path:
+    folder = reduced_box(case, tmp_path / case)
+    path = folder / "study.toml"
+    text = path.read_text(encoding="utf-8")
+    path.write_text(text.replace("[calibration]\n", f'[calibration]\nmoves = "{moves}"\n'))
+    return folder
 
 
-@pytest.fixture(scope="module", params=CASES)
+@pytest.fixture(scope="module", params=[(c, m) for c in CASES for m in ("gibbs", "joint")], ids=str)
 def results(request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFactory) -> Results:
-    folder = _folder(str(request.param), tmp_path_factory.mktemp("box"))
+    """Each box with both kinds of moves (the examples ship ``"joint"``: screened joint
+    moves of the parameters, lambda*, phi and r)."""
+    case, moves = request.param
+    folder = _folder(case, tmp_path_factory.mktemp("box"), moves)
     return run(load_study(folder), until="predict", options=SERIAL)
 
 
