@@ -163,6 +163,7 @@ def moves_hint(posterior: Posterior) -> str | None:
     return (
         f"{names[i]} and {names[j]} are correlated in the posterior ({corr[i, j]:+.2f}): "
         'one-at-a-time moves crawl along such ridges; try [calibration] moves = "joint", '
-        "which moves them together (Twin House, 7 coordinates: 7-8x the ESS per "
-        "evaluation; an office with 16: worse; compare the diagnostics, docs/method.md 4)"
+        "which moves them together (Twin House, boxes, office: 3-10x the ESS per second; "
+        "a block of 16 needs a burn-in of ~2000 sweeps; compare the diagnostics, "
+        "docs/method.md 4)"
     )
