@@ -190,6 +190,20 @@ class Ridge3(Counted):
         return ridge(points[:, :2]) - 0.5 * third * third
 
 
+def _assert_ridge3_moments(draws: NDArray[np.float64]) -> None:
+    """Means, correlation and SDs of :class:`Ridge3` draws ``(chains, n, 3)`` within
+    ``N_SE`` Monte Carlo standard errors (ArviZ) of the exact values."""
+    az = import_arviz()
+    a, third = draws[:, :, 0], draws[:, :, 2]
+    logit = special.logit(draws[:, :, 1])
+    for values, mean in ((a, 0.0), (logit, 0.0), (third, MEAN_3)):
+        assert abs(values.mean() - mean) < N_SE * float(az.mcse(values, method="mean"))
+    product = (a / SD[0]) * (logit / SD[1])
+    assert abs(product.mean() - RHO) < N_SE * float(az.mcse(product, method="mean"))
+    for values, sd in ((a, SD[0]), (third, SD_3)):
+        assert abs(values.std() - sd) < N_SE * float(az.mcse(values, method="sd"))
+
+
 def _after(k: int, n_burn: int = 1000) -> MetropolisWithinGibbs:
     return MetropolisWithinGibbs(
         n_burn=n_burn, lower=[-math.inf, 0.0, -math.inf], upper=[math.inf, 1.0, math.inf],
@@ -214,13 +228,7 @@ def test_joint_moves_only_after_burn_in_sample_the_target_and_mix_per_evaluation
             rows[name] += target.rows
             if name == "after" and seed == 0:
                 after = run
-    a, third = after.draws[:, :, 0], after.draws[:, :, 2]
-    logit = special.logit(after.draws[:, :, 1])
-    for values, mean in ((a, 0.0), (logit, 0.0), (third, MEAN_3)):
-        assert abs(values.mean() - mean) < N_SE * float(az.mcse(values, method="mean"))
-    product = (a / SD[0]) * (logit / SD[1])
-    assert abs(product.mean() - RHO) < N_SE * float(az.mcse(product, method="mean"))
-    assert abs(third.std() - SD_3) < N_SE * float(az.mcse(third, method="sd"))
+    _assert_ridge3_moments(after.draws)
     per_eval = {name: ess[name] / rows[name] for name in ess}
     assert per_eval["after"] > 1.5 * per_eval["gibbs"], per_eval
     # the joint block's acceptance is the joint move's rate (adapted towards 0.234)
@@ -229,13 +237,17 @@ def test_joint_moves_only_after_burn_in_sample_the_target_and_mix_per_evaluation
         assert 0.2 < result.acceptance[2] < 0.7
 
 
-def test_joint_moves_only_after_burn_in_are_the_same_in_lockstep() -> None:
-    sampler = _after(3, n_burn=300)
+@pytest.mark.parametrize("screen", [False, True])
+def test_joint_moves_only_after_burn_in_are_the_same_in_lockstep(screen: bool) -> None:
+    """Unscreened and screened (delayed acceptance) joint moves alike."""
+    sampler = _screened(3, n_burn=300, screen=screen)
     serial = run_chains(sampler, Ridge3(), STARTS_3, 200, seed=6, backend="serial")
     lockstep = run_chains(sampler, Ridge3(), STARTS_3, 200, seed=6, backend="vectorised")
     np.testing.assert_array_equal(lockstep.draws, serial.draws)
     np.testing.assert_array_equal(lockstep.log_density, serial.log_density)
     np.testing.assert_array_equal(lockstep.acceptance, serial.acceptance)
+    assert [r.screened for r in lockstep.results] == [r.screened for r in serial.results]
+    assert all((r.screened is not None) is screen for r in serial.results)
 
 
 @pytest.mark.parametrize("backend", ["serial", "vectorised"])
@@ -284,13 +296,7 @@ def test_screened_joint_moves_sample_the_target_with_fewer_evaluations() -> None
             rows[screen] += target.rows
             if screen and seed == 0:
                 screened = run
-    a, third = screened.draws[:, :, 0], screened.draws[:, :, 2]
-    logit = special.logit(screened.draws[:, :, 1])
-    for values, mean in ((a, 0.0), (logit, 0.0), (third, MEAN_3)):
-        assert abs(values.mean() - mean) < N_SE * float(az.mcse(values, method="mean"))
-    product = (a / SD[0]) * (logit / SD[1])
-    assert abs(product.mean() - RHO) < N_SE * float(az.mcse(product, method="mean"))
-    assert abs(a.std() - SD[0]) < N_SE * float(az.mcse(a, method="sd"))
+    _assert_ridge3_moments(screened.draws)
     assert rows[True] < 0.75 * rows[False], rows
     for result in screened.results:  # the share of joint proposals turned down unseen
         assert result.screened is not None
@@ -327,16 +333,6 @@ def test_screen_keeps_a_curved_target_exact() -> None:
     a, b = run.draws[:, :, 0], run.draws[:, :, 1]
     for values, mean in ((a, 0.0), (b, 1.0), (a * a, 1.0)):
         assert abs(values.mean() - mean) < N_SE * float(az.mcse(values, method="mean"))
-
-
-def test_screened_joint_moves_are_the_same_in_lockstep() -> None:
-    sampler = _screened(3, n_burn=300)
-    serial = run_chains(sampler, Ridge3(), STARTS_3, 200, seed=6, backend="serial")
-    lockstep = run_chains(sampler, Ridge3(), STARTS_3, 200, seed=6, backend="vectorised")
-    np.testing.assert_array_equal(lockstep.draws, serial.draws)
-    np.testing.assert_array_equal(lockstep.log_density, serial.log_density)
-    np.testing.assert_array_equal(lockstep.acceptance, serial.acceptance)
-    assert [r.screened for r in lockstep.results] == [r.screened for r in serial.results]
 
 
 @pytest.mark.parametrize("backend", ["serial", "vectorised"])
