@@ -126,10 +126,10 @@ class MetropolisWithinGibbs:
         burn-in, as before). Needs ``joint``.
     screen
         Delayed acceptance of the joint moves: each proposal is first tested
-        against a Gaussian stand-in of the block learnt during burn-in, and the
+        against a Student-t stand-in of the block learnt during burn-in, and the
         log-density is evaluated only for those that pass
         (:mod:`~bayescal.mcmc.samplers.joint`). Same target, fewer evaluations
-        where the block's posterior is close to Gaussian on the sampling scale.
+        where that stand-in is close to the block's posterior on the sampling scale.
         Needs ``joint``; draws one more uniform per joint move.
     """
 
