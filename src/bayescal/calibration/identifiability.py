@@ -141,8 +141,8 @@ def moves_hint(posterior: Posterior) -> str | None:
     sampled coordinates (theta* and the noise terms, on the log scale where
     positive) are correlated beyond ``CORRELATED`` in the posterior: random-walk
     steps one coordinate at a time crawl along such ridges, and
-    ``[calibration] moves = "joint"`` moves them together (better on the Twin
-    House, worse on a 16-coordinate office calibration: a suggestion to check).
+    ``[calibration] moves = "joint"`` moves them together (better on every shipped
+    example; a 16-coordinate block needs a long burn-in: a suggestion to check).
     """
     d = posterior.diagnostics
     slow = (d.rhat > RHAT_MAX) | (d.ess_bulk < ESS_MIN) | (d.ess_tail < ESS_MIN)

@@ -225,9 +225,12 @@ def screen_precision(js: JointState) -> FloatArray | None:
         return None
 
 
-def screen_ready(js: JointState) -> bool:
-    """Whether the current window's mean is estimated well enough to screen with."""
-    return js.n >= min_samples(js.mean.size)
+def screen_in_use(js: JointState, precision: FloatArray | None) -> FloatArray | None:
+    """``precision`` where this sweep screens (an estimate exists and the current
+    window's mean has ``min_samples`` sweeps), else ``None``."""
+    if precision is None or js.n < min_samples(js.mean.size):
+        return None
+    return precision
 
 
 def screen_log_ratio(
@@ -282,7 +285,7 @@ __all__ = [
     "map_values",
     "min_samples",
     "propose",
+    "screen_in_use",
     "screen_log_ratio",
     "screen_precision",
-    "screen_ready",
 ]

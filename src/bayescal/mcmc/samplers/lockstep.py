@@ -445,11 +445,12 @@ class _Lockstep:
             n_moves = max(1, self.joint_after_burn)
             eps_j = np.stack([rng.standard_normal((size, n_moves, n_j)) for rng in rngs], axis=2)
             log_u_j = np.stack([np.log1p(-rng.random((size, n_moves))) for rng in rngs], axis=2)
+            assert s.joint is not None
+            precisions: list[FloatArray | None] = [None] * len(rngs)
             if self.screen:
                 log_u_screen = np.stack(
                     [np.log1p(-rng.random((size, n_moves))) for rng in rngs], axis=2
                 )
-                assert s.joint is not None
                 precisions = [jm.screen_precision(js) for js in s.joint]
         n_chains = len(rngs)
         kept: list[tuple[FloatArray, FloatArray]] = []
@@ -460,21 +461,13 @@ class _Lockstep:
                 if not (only and i in inside):
                     self._update(s, i, eps[row, k], log_u[row, k])
             if self.joint:
-                screens: list[tuple[FloatArray, float] | None] = [None] * n_chains
-                if self.screen:
-                    assert s.joint is not None
-                    ready = [
-                        p is not None and jm.screen_ready(js)
-                        for p, js in zip(precisions, s.joint, strict=True)
-                    ]
+                assert s.joint is not None
+                ready = [jm.screen_in_use(js, p) for p, js in zip(precisions, s.joint, strict=True)]
                 for move in range(self.joint_after_burn if only else 1):
-                    if self.screen:
-                        screens = [
-                            (p, float(log_u_screen[row, move, b]))
-                            if ready[b] and p is not None
-                            else None
-                            for b, p in enumerate(precisions)
-                        ]
+                    screens = [
+                        None if p is None else (p, float(log_u_screen[row, move, b]))
+                        for b, p in enumerate(ready)
+                    ]
                     self._joint_update(s, eps_j[row, move], log_u_j[row, move], screens)
                 if jm.collecting(n_done + row, self.n_burn):
                     for b, js in enumerate(s.joint or ()):

@@ -426,13 +426,12 @@ class _Loop:
             if self.joint:
                 s.lp = lp
                 assert s.joint is not None
-                ready = precision if self.screen and jm.screen_ready(s.joint) else None
+                ready = jm.screen_in_use(s.joint, precision)
                 for move in range(self.joint_after_burn if only else 1):
                     screen = None if ready is None else (ready, log_u_screen[row][move])
                     self._joint_move(s, eps_j[row, move], log_u_j[row][move], screen)
                 lp = s.lp
                 if jm.collecting(n_done + row, self.n_burn):
-                    assert s.joint is not None
                     if jm.restarting(n_done + row, self.n_burn):
                         s.joint.restart()
                     s.joint.collect(np.array([z[i] for i in self.joint]))
