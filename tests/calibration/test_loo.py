@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 import pytest
 from scipy import linalg, stats
@@ -15,6 +17,23 @@ def _ar1_corr(n: int, phi: float) -> np.ndarray:
     return phi ** np.abs(i[:, None] - i[None, :])
 
 
+def _two_outputs(seed: int, m: int, model: str, discrepancy: Any) -> tuple[Any, ...]:
+    """Output a (7 samples, 2 bases, the error model and discrepancy given) and output b
+    (5 samples, 1 basis, white), random data over ``m`` periods, the emulator's
+    prediction ``mean, var`` ``(m, 3)``, ``k_j^T k_j`` and ``1 / tau_j``."""
+    rng = np.random.default_rng(seed)
+    k = linalg.block_diag(rng.normal(size=(7, 2)), rng.normal(size=(5, 1)))
+    y = rng.normal(size=(12, m))
+    outputs = (
+        OutputNoise("a", (0, 7), (0, 1), model, discrepancy=discrepancy),  # type: ignore[arg-type]
+        OutputNoise("b", (7, 12), (2,)),
+    )
+    obs = ObservationModel(outputs, k, y)
+    mean, var = rng.normal(size=(m, 3)), rng.uniform(0.1, 0.5, (m, 3))
+    ktk = np.einsum("ij,ij->j", k, k)
+    return rng, k, y, obs, mean, var, ktk, rng.uniform(0.5, 2.0, 3)
+
+
 CASES = [("white", 0.0, False), ("ar1", 0.7, False), ("white", 0.0, True), ("ar1", -0.4, True)]
 
 
@@ -24,18 +43,8 @@ def test_period_density_is_the_gaussian_of_the_samples(
 ) -> None:
     # Two outputs with block-diagonal bases; each period's samples are
     # y = K w + e, w ~ N(mean, diag(var) + r tau^-1), e ~ N(0, R / lambda*).
-    rng = np.random.default_rng(3)
-    k = linalg.block_diag(rng.normal(size=(7, 2)), rng.normal(size=(5, 1)))
     m = 4
-    y = rng.normal(size=(12, m))
-    outputs = (
-        OutputNoise("a", (0, 7), (0, 1), model, discrepancy=discrepancy),  # type: ignore[arg-type]
-        OutputNoise("b", (7, 12), (2,)),
-    )
-    obs = ObservationModel(outputs, k, y)
-    mean, var = rng.normal(size=(m, 3)), rng.uniform(0.1, 0.5, (m, 3))
-    ktk = np.einsum("ij,ij->j", k, k)
-    variances = rng.uniform(0.5, 2.0, 3)
+    _, k, y, obs, mean, var, ktk, variances = _two_outputs(3, m, model, discrepancy)
     values = {"lambda_star_a": 9.0, "lambda_star_b": 4.0}
     if model == "ar1":
         values["phi_a"] = phi
@@ -53,6 +62,56 @@ def test_period_density_is_the_gaussian_of_the_samples(
             cov = kq @ cov_w @ kq.T + _ar1_corr(kq.shape[0], ph) / lam
             want += stats.multivariate_normal(kq @ mean[i, bases], cov).logpdf(y[rows, i])
         assert got[i] == pytest.approx(want, rel=1e-10)
+
+
+@pytest.mark.parametrize(
+    ("model", "phi", "kind"),
+    [("white", 0.0, "conditions"), ("ar1", 0.7, "conditions"), ("ar1", -0.4, "both"),
+     ("white", 0.0, "independent")],
+)  # fmt: skip
+def test_a_discrepancy_over_the_conditions_is_kriged_from_the_other_periods(
+    model: str, phi: float, kind: str
+) -> None:
+    # Output a carries delta_ij with cov r tau_j c_x(x_i, x_k) (+ r0 tau_j [i = k]); each
+    # period's density is then that of its samples given every other period's samples
+    # (the dense Gaussian conditional of all m* periods' samples); output b's periods
+    # stay independent.
+    m = 5
+    rng, k, y, obs, mean, var, ktk, variances = _two_outputs(5, m, model, kind)
+    xs = rng.random((m, 2))
+    x_corr = np.stack([np.exp(-((xs[:, None, :] - xs[None, :, :]) ** 2).sum(-1) / (2 * s * s))
+                       for s in (0.4, 0.7, 0.3)])  # fmt: skip
+    r, r0 = 0.3, 0.2
+    values = {"lambda_star_a": 9.0, "lambda_star_b": 4.0, "delta_rel_a": r, "delta_ind_a": r0}
+    if model == "ar1":
+        values["phi_a"] = phi
+    over_x, independent = kind in ("conditions", "both"), kind in ("independent", "both")
+    got = period_log_densities(obs, values, mean, var, ktk, variances, obs.ls_weights(), x_corr)
+    # output a: all periods' samples at once (period-major), conditioned period by period
+    ka, n = k[:7, :2], 7
+    cov = np.zeros((m * n, m * n))
+    for j in range(2):
+        c_w = np.diag(var[:, j]) + variances[j] * (
+            over_x * r * x_corr[j] + independent * r0 * np.eye(m)
+        )
+        cov += np.kron(c_w, np.outer(ka[:, j], ka[:, j]))
+    cov += np.kron(np.eye(m), _ar1_corr(n, phi) / 9.0)
+    mu = (mean[:, :2] @ ka.T).reshape(-1)
+    ya = y[:7].T.reshape(-1)
+    for i in range(m):
+        own = np.arange(i * n, (i + 1) * n)
+        rest = np.setdiff1d(np.arange(m * n), np.arange(i * n, (i + 1) * n))
+        gain = np.linalg.solve(cov[np.ix_(rest, rest)], cov[np.ix_(rest, own)]).T
+        c_mean = mu[own] + gain @ (ya[rest] - mu[rest])
+        c_cov = cov[np.ix_(own, own)] - gain @ cov[np.ix_(rest, own)]
+        want = stats.multivariate_normal(c_mean, c_cov).logpdf(ya[own])
+        kb = k[7:, 2:]
+        c_b = kb @ np.diag(var[i, 2:]) @ kb.T + np.eye(5) / 4.0
+        want += stats.multivariate_normal(kb @ mean[i, 2:], c_b).logpdf(y[7:, i])
+        assert got[i] == pytest.approx(want, rel=1e-9)
+    # the other periods moved the score where the discrepancy is correlated (can fail)
+    marginal = period_log_densities(obs, values, mean, var, ktk, variances, obs.ls_weights())
+    assert np.any(np.abs(got - marginal) > 1e-3) == over_x
 
 
 def test_psis_loo_of_a_known_normal_model() -> None:

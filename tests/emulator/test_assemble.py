@@ -152,7 +152,7 @@ def test_noise_specs_reach_the_observation_model(small: VirtualExperiment) -> No
         small.design, small.runs, small.measured, small.boundary, small.layout, noise=noise
     )
     (out,) = a.observations.outputs
-    assert (out.model, out.discrepancy) == ("ar1", True)
+    assert (out.model, out.discrepancy) == ("ar1", "conditions")
     assert a.observations.names() == ("lambda_star", "phi", "delta_rel")
     plain = assemble(small.design, small.runs, small.measured, small.boundary, small.layout)
     assert not plain.observations.outputs[0].discrepancy

@@ -26,6 +26,8 @@ from scipy import linalg, stats
 from bayescal.calibration import kron as kron_module
 from bayescal.calibration.dense import DenseCalibrationDensity
 from bayescal.calibration.kron import KronCalibrationDensity
+from bayescal.calibration.target import CalibrationPosterior
+from bayescal.design import UniformPrior
 from bayescal.emulator.assemble import Assembled, NoiseSpec, assemble
 from bayescal.emulator.dense import gaussian_logdensity, grid_inputs
 from bayescal.emulator.kernel import SeparableKernel
@@ -108,8 +110,9 @@ def test_grouped_noise_equals_the_dense_covariance(seed: int) -> None:
     assert plain.logpdf == pytest.approx(density.pieces_nuggets(theta_star, a, a_star).logpdf)
 
 
-def _raw_density(theta, x, kernels, a, k, y_star, theta_star, noise_cov, w):
-    """log p(W_sim, Y*) from the joint Gaussian of the simulator weights and all samples."""
+def _raw_density(theta, x, kernels, a, k, y_star, theta_star, noise_cov, w, extra=None):
+    """log p(W_sim, Y*) from the joint Gaussian of the simulator weights and all samples
+    (``extra``: more covariance of the samples, period-major)."""
     n_runs, n_per = theta.shape[0], x.shape[0]
     n, p = k.shape
     z = grid_inputs(theta, x)
@@ -130,6 +133,8 @@ def _raw_density(theta, x, kernels, a, k, y_star, theta_star, noise_cov, w):
         c_obs = kern.full(z_obs)  # (m*, m*)
         cov[ys, ys] += np.kron(c_obs, np.outer(k[:, j], k[:, j]))
     cov[ys, ys] += np.kron(np.eye(n_per), noise_cov)
+    if extra is not None:
+        cov[ys, ys] += extra
     cov[ys, :] = cov[:, ys].T
     cov[ys, ys] = 0.5 * (cov[ys, ys] + cov[ys, ys].T)
     return gaussian_logdensity(cov, vec).logpdf
@@ -163,6 +168,62 @@ def test_ar1_factorisation_equals_the_raw_data_density(phi: float, seed: int) ->
     if phi == 0.0:  # white: per-basis nuggets and eq. 7's Gamma terms give the same
         white = density.pieces_nuggets(theta_star, a, model.white_nuggets([lam_star])).logpdf
         assert white == pytest.approx(fast.logpdf, rel=REL)
+
+
+@pytest.mark.parametrize(
+    ("kind", "phi", "seed"),
+    [(True, 0.6, 0), ("independent", 0.6, 1), ("both", 0.9, 2), ("independent", -0.3, 3),
+     ("both", 0.0, 4)],
+)  # fmt: skip
+def test_discrepancy_kinds_in_the_target_equal_the_raw_data_density(
+    kind: Any, phi: float, seed: int
+) -> None:
+    # The calibration target's likelihood (eq. 16 with AR(1) errors, section 4a) with a
+    # discrepancy over the conditions (r c_x), independent between periods (r0 per
+    # period, none across) or both, against the joint Gaussian of the simulator
+    # weights and every measured sample written out in full.
+    rng, kernels, theta, x = _problem(seed, n_runs=5, n_per=4, p=2)
+    n = 9
+    k = np.linalg.qr(rng.normal(size=(n, 2)))[0] * np.array([3.0, 1.5])  # orthogonal columns
+    y_star = rng.normal(size=(n, x.shape[0]))
+    w = rng.normal(size=(theta.shape[0] * x.shape[0], 2))
+    lam, lam_star, r, r0 = 40.0, 7.0, 0.08, 0.3
+    model = ObservationModel(
+        (OutputNoise("q", (0, n), (0, 1), "ar1", discrepancy=kind),), k, y_star
+    )
+    ktk = np.einsum("ij,ij->j", k, k)
+    density = KronCalibrationDensity(theta, x, kernels, ktk, w, model.ls_weights())
+    priors = [UniformPrior(0.0, 1.0)] * theta.shape[1]
+    target = CalibrationPosterior(density, priors, (5.0, 5.0), observations=model)
+    theta_star = rng.random(theta.shape[1])
+    rel = {"delta_rel": r, "delta_ind": r0}
+    v = np.array([*theta_star, lam, lam_star, phi, *(rel[c] for c, _ in model.delta_coordinates)])
+    over_x, independent = kind in (True, "both"), kind in ("independent", "both")
+    assert len(model.delta_coordinates) == over_x + independent
+    # dense: the discrepancy on basis j adds (r/tau_j c_x + r0/tau_j I) (x) k_j k_j^T
+    extra = np.zeros((n * x.shape[0], n * x.shape[0]))
+    for j, kern in enumerate(kernels):
+        corr = over_x * r * kern.x_corr(x) + independent * r0 * np.eye(x.shape[0])
+        extra += np.kron(kern.variance * corr, np.outer(k[:, j], k[:, j]))
+    a = 1.0 / (lam * ktk)
+    ref = _raw_density(theta, x, kernels, a, k, y_star, theta_star, _ar1_corr(n, phi) / lam_star, w,
+                       extra)  # fmt: skip
+    got = target(v) - target.log_prior(v)
+    assert got == pytest.approx(ref, rel=REL)
+    if phi == 0.0:  # a white output: the independent part joins the per-basis nuggets
+        white = ObservationModel(
+            (OutputNoise("q", (0, n), (0, 1), "white", discrepancy=kind),), k, y_star
+        )
+        target_w = CalibrationPosterior(density, priors, (5.0, 5.0), observations=white)
+        v_w = np.delete(v, theta.shape[1] + 2)  # no phi
+        in_basis = target_w(v_w) - target_w.log_prior(v_w)  # eq. 7 holds the remainder
+        remainder = model.remainder(0, model.gls(0, 0.0), lam_star)
+        assert in_basis == pytest.approx(got - remainder, rel=REL)
+    # the discrepancy changed the density (the test can fail)
+    plain = _raw_density(
+        theta, x, kernels, a, k, y_star, theta_star, _ar1_corr(n, phi) / lam_star, w
+    )
+    assert got != pytest.approx(plain, rel=1e-6)
 
 
 def test_with_observations_reuses_the_grid_and_agrees_with_a_rebuild() -> None:
@@ -297,7 +358,7 @@ def test_assemble_carries_each_outputs_error_model(
         scale="output", noise={"heat_flux_in": NoiseSpec("ar1", 0.1, discrepancy=True)},
     )  # fmt: skip
     (o,) = a.observations.outputs
-    assert (o.model, o.discrepancy, o.unit) == ("ar1", True, "W/m²")
+    assert (o.model, o.discrepancy, o.unit) == ("ar1", "conditions", "W/m²")
     assert a.observations.names() == ("lambda_star", "phi", "delta_rel")
     # the stated accuracy is the prior's centre, in standardised units
     assert o.prior[0] / o.prior[1] == pytest.approx((o.scale / 0.1) ** 2)

@@ -125,7 +125,7 @@ def run_case(
     noise_phi: float = 0.0,
     true_wall: MultilayerWall | None = None,
     means: bool = False,
-    discrepancy: bool = False,
+    discrepancy: bool | str = False,
     n_burn: int = 1000,
     n_draws: int = 1000,
 ) -> CaseResult:

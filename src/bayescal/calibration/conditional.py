@@ -104,6 +104,18 @@ def krige_observed(
     return mean, cov
 
 
+def same_periods(x: FloatArray) -> FloatArray:
+    """``1`` where two rows of conditions ``(M, s)`` are the same period, else ``0``.
+
+    A period predicted again (the training periods among the predicted ones)
+    has exactly its own conditions; two different periods never have all of
+    them equal (they are continuous summaries of the weather).
+    """
+    arr = np.atleast_2d(np.asarray(x, dtype=float))
+    equal = np.all(arr[:, None, :] == arr[None, :, :], axis=2)
+    return equal.astype(float)
+
+
 @dataclass(frozen=True)
 class OutputDiscrepancy:
     """The discrepancy of one output, ready to be conditioned draw by draw.
@@ -119,12 +131,17 @@ class OutputDiscrepancy:
         predicted ones, ``(p_o, M, M)``. [-]
     variances
         ``1 / tau_j`` of its bases ``(p_o,)``. [-]
+    same_period
+        ``1`` where two of these rows are the same period, else ``0``,
+        ``(M, M)``: the correlation of the discrepancy's part independent
+        between periods. [-]
     """
 
     observations: ObservationModel
     q: int
     x_corr: FloatArray
     variances: FloatArray
+    same_period: FloatArray
 
     @classmethod
     def build(
@@ -156,6 +173,7 @@ class OutputDiscrepancy:
             q,
             np.stack([kernels[j].x_corr(x_all) for j in bases]),
             np.array([kernels[j].variance for j in bases]),
+            same_periods(x_all),
         )
 
     @property
@@ -194,9 +212,15 @@ class OutputDiscrepancy:
         obs, q = self.observations, self.q
         lam = float(values[obs.coordinate("lambda_star", q)])
         phi = float(values[obs.coordinate("phi", q)]) if q in obs.ar_outputs else 0.0
-        r = float(values[obs.coordinate("delta_rel", q)])
         measured = obs.weights_of(q, obs.block(q)[1], phi)
-        prior = (r * self.variances)[:, None, None] * self.x_corr
+        parts = obs.outputs[q].delta_parts
+        prior = np.zeros_like(self.x_corr)
+        if "delta_rel" in parts:
+            r = float(values[obs.coordinate("delta_rel", q)])
+            prior += (r * self.variances)[:, None, None] * self.x_corr
+        if "delta_ind" in parts:
+            r0 = float(values[obs.coordinate("delta_ind", q)])
+            prior += (r0 * self.variances)[:, None, None] * self.same_period
         if eta_cov is not None:
             prior = prior + eta_cov
         return krige_observed(measured - model, prior, obs.noise_block(q, lam, phi))

@@ -10,8 +10,10 @@ left out in turn and predicted from the calibration on the others:
 | v; simulations)`` the density of the period's measured samples given the
 draw and the simulator runs (:func:`bayescal.calibration.loo.period_log_densities`):
 the left-out period is predicted the way bayescal predicts the test window,
-from the calibrated parameters and the emulator, not from the residuals of
-neighbouring periods.
+from the calibrated parameters and the emulator, and, for an output with a
+discrepancy over the periods' conditions, that discrepancy kriged from the
+other training periods' residuals (the predictions condition it on the
+training residuals in the same way).
 
 **Physical units.** The densities of :mod:`~bayescal.calibration.loo` are
 those of the *standardised* samples ``(y - mean) / sd``. A variant with another

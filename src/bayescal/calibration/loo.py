@@ -7,13 +7,17 @@ predictive density under the posterior: for every retained draw ``s``
     l_is = log p(y*_i | theta*_s, lambda*_s, phi_s, r_s; simulations),
 
 the density of the period's measurements given the draw and the simulator
-runs (not the other measured periods): in the weights' space,
-``w_hat_i ~ N(mu_i, diag(v_i) + r tau^-1 + N_obs)`` with ``mu_i, v_i`` the
-emulator's prediction at ``(theta*_s, x_i)``, ``r tau^-1`` a model discrepancy
-where one is used, ``N_obs`` the noise of the observed weights (white:
-``1 / (lambda* k_j^T k_j)``; AR(1): ``H0^-1 / lambda*``), plus the out-of-basis
-remainder of :mod:`bayescal.emulator.noise` (so the density is that of the
-measured samples, comparable across error models and bases).
+runs, predicted the way bayescal predicts a test period: in the weights' space,
+``w_hat_i ~ N(mu_i, diag(v_i) + r_0 tau^-1 + N_obs)`` with ``mu_i, v_i`` the
+emulator's prediction at ``(theta*_s, x_i)``, ``r_0 tau^-1`` a model discrepancy
+independent between periods where one is used, ``N_obs`` the noise of the
+observed weights (white: ``1 / (lambda* k_j^T k_j)``; AR(1): ``H0^-1 /
+lambda*``), plus the out-of-basis remainder of :mod:`bayescal.emulator.noise`
+(so the density is that of the measured samples, comparable across error models
+and bases). A discrepancy over the periods' conditions, ``GP(0, r tau^-1 c_x)``,
+is kriged from the other training periods' residuals, as the predictions
+condition it on the training residuals (:func:`kriged_in_basis`); the other
+measured periods enter nowhere else.
 
 :func:`elpd` estimates the expected log predictive density of a left-out period
 by Pareto-smoothed importance sampling (ArviZ's ``loo``), with its standard
@@ -77,11 +81,15 @@ def pointwise_log_likelihood(
     ktk = emulator.basis.ktk
     variances = np.array([k.variance for k in emulator.kernels])
     ls_weights = obs.ls_weights()
+    over_x = any(kind == "delta_rel" for kind, _ in obs.delta_coordinates)
+    x_corr = np.stack([k.x_corr(x[:m]) for k in emulator.kernels]) if over_x else None
     for c in range(chains):
         for s in range(pick.size):
             mean, var = emulator.predict_weights(np.broadcast_to(unit[c, s], (m, unit.shape[2])), x)
             values = dict(zip(names, aux[c, s], strict=True))
-            out[c, s] = period_log_densities(obs, values, mean, var, ktk, variances, ls_weights)
+            out[c, s] = period_log_densities(
+                obs, values, mean, var, ktk, variances, ls_weights, x_corr
+            )
     return out
 
 
@@ -93,6 +101,7 @@ def period_log_densities(
     ktk: FloatArray,
     variances: FloatArray,
     ls_weights: FloatArray,
+    x_corr: FloatArray | None = None,
 ) -> FloatArray:
     """Log density of every period's measurements ``(m*,)`` at one draw.
 
@@ -111,6 +120,11 @@ def period_log_densities(
         ``1 / tau_j`` ``(p,)`` (scale of a discrepancy). [-]
     ls_weights
         Least-squares weights of the measured periods ``(m*, p)``. [-]
+    x_corr
+        ``c_x`` of every basis over the training periods ``(p, m*, m*)``: a
+        discrepancy over the conditions is then kriged from the other periods'
+        residuals, as the predictions do (:func:`kriged_in_basis`); ``None``:
+        its marginal. [-]
     """
     names = obs.names()
     m = obs.y_star.shape[1]
@@ -120,9 +134,13 @@ def period_log_densities(
         bases = list(o.bases)
         cov = np.zeros((m, o.p, o.p))
         cov[:, np.arange(o.p), np.arange(o.p)] = var[:, bases]
-        if o.discrepancy:
-            r = values[obs.coordinate("delta_rel", q)]
-            cov[:, np.arange(o.p), np.arange(o.p)] += r * variances[bases]
+        kriged = None
+        for kind in o.delta_parts:
+            r = values[obs.coordinate(kind, q)]
+            if kind == "delta_rel" and x_corr is not None:
+                kriged = (r * variances[bases])[:, None, None] * x_corr[bases]
+            else:  # independent between periods, or no correlation given: its marginal
+                cov[:, np.arange(o.p), np.arange(o.p)] += r * variances[bases]
         kq, yq = obs.block(q)
         if o.model == "ar1":
             phi = values[obs.coordinate("phi", q)]
@@ -139,17 +157,50 @@ def period_log_densities(
             resid = yq - kq @ w_hat.T
         rss = np.sum(resid * resid, axis=0)  # per period
         diff = w_hat - mean[:, bases]
-        chol = np.linalg.cholesky(cov)
-        half = np.linalg.solve(chol, diff[:, :, None])[:, :, 0]
-        in_basis = -0.5 * (
-            o.p * LOG_2PI
-            + 2.0 * np.sum(np.log(np.diagonal(chol, axis1=1, axis2=2)), axis=1)
-            + np.sum(half * half, axis=1)
-        )
+        if kriged is not None:
+            in_basis = kriged_in_basis(diff, kriged, cov)
+        else:
+            chol = np.linalg.cholesky(cov)
+            half = np.linalg.solve(chol, diff[:, :, None])[:, :, 0]
+            in_basis = -0.5 * (
+                o.p * LOG_2PI
+                + 2.0 * np.sum(np.log(np.diagonal(chol, axis1=1, axis2=2)), axis=1)
+                + np.sum(half * half, axis=1)
+            )
         dof = o.n - o.p
         remainder = -0.5 * (dof * (LOG_2PI - math.log(lam)) + logdet_r + logdet_h0 + lam * rss)
         total += in_basis + remainder
     return total
+
+
+def kriged_in_basis(diff: FloatArray, prior: FloatArray, blocks: FloatArray) -> FloatArray:
+    """Log density of each period's weights given every other period's ``(m*,)``.
+
+    The residual weights ``e = w_hat - mu`` ``(m*, p_o)`` are Gaussian with
+    covariance ``Sigma = G + blockdiag_i(B_i)``: ``G`` the discrepancy over the
+    conditions, ``prior[j] = r tau_j^-1 c_x`` ``(p_o, m*, m*)`` per basis, ``B_i``
+    ``(m*, p_o, p_o)`` what belongs to period ``i`` alone (the emulator's
+    variance, the observed weights' noise, a discrepancy independent between
+    periods). Period ``i`` given the others is ``N(e_i - P_ii^-1 u_i, P_ii^-1)``
+    with ``P = Sigma^-1`` and ``u = P e`` (the Gaussian leave-one-out identity),
+    so its log density is ``-(p_o log 2 pi - log|P_ii| + u_i^T P_ii^-1 u_i) / 2``.
+    """
+    m, p = diff.shape
+    sigma = np.zeros((m, p, m, p))  # period-major
+    for j in range(p):
+        sigma[:, j, :, j] = prior[j]
+    sigma[np.arange(m), :, np.arange(m), :] += blocks
+    flat = sigma.reshape(m * p, m * p)
+    precision = np.linalg.inv(0.5 * (flat + flat.T)).reshape(m, p, m, p)
+    u = np.einsum("iajb,jb->ia", precision, diff)
+    out = np.empty(m)
+    for i in range(m):
+        block = 0.5 * (precision[i, :, i, :] + precision[i, :, i, :].T)
+        chol = np.linalg.cholesky(block)
+        half = np.linalg.solve(chol, u[i])  # u_i^T P_ii^-1 u_i = |L^-1 u_i|^2
+        logdet = 2.0 * float(np.sum(np.log(np.diagonal(chol))))
+        out[i] = -0.5 * (p * LOG_2PI - logdet + float(half @ half))
+    return out
 
 
 @dataclass(frozen=True)

@@ -109,7 +109,7 @@ class CalibrationPosterior:
                 for q, o in enumerate(observations.outputs)
             )
         n_phi = 0 if observations is None else len(observations.ar_outputs)
-        n_delta = 0 if observations is None else len(observations.delta_outputs)
+        n_delta = 0 if observations is None else len(observations.delta_coordinates)
         self.prior_terms = CalibrationPriors(tuple(priors), lam_prior, stars, n_phi, n_delta)
         self.t = self.prior_terms.t
         self._reset()
@@ -201,13 +201,21 @@ class CalibrationPosterior:
         lam_star = arr[t + 1 : t + 1 + n_out]
         a = 1.0 / (float(arr[t]) * self.algebra.data.ktk)
         a_star = obs.white_nuggets(lam_star)
-        delta = self._delta(arr[t + 1 + n_out + n_phi :])
+        delta, independent = self._delta(arr[t + 1 + n_out + n_phi :])
+        if independent is not None:  # no covariance between periods: a period's noise block
+            a_star = a_star + independent
         if not self.coupled:
             return self.algebra.pieces_nuggets(arr[:t], a, a_star, delta).logpdf
         phi = arr[t + 1 + n_out : t + 1 + n_out + n_phi]
         algebra, pieces = self._observed_memo.get(phi.tobytes(), lambda: self._observed(phi))
         groups = [
-            (obs.outputs[q].bases, piece.h0_inv / float(lam_star[q]))
+            (
+                obs.outputs[q].bases,
+                piece.h0_inv / float(lam_star[q])
+                + (
+                    0.0 if independent is None else np.diag(independent[list(obs.outputs[q].bases)])
+                ),
+            )
             for q, piece in zip(obs.ar_outputs, pieces, strict=True)
         ]
         total = algebra.pieces_grouped(arr[:t], a, a_star, groups, delta).logpdf
@@ -215,17 +223,14 @@ class CalibrationPosterior:
             total += obs.remainder(q, piece, float(lam_star[q]))
         return total
 
-    def _delta(self, rel: FloatArray) -> FloatArray | None:
-        """Per-basis discrepancy variances ``r_o tau_j^-1`` from the outputs' ``r``."""
+    def _delta(self, rel: FloatArray) -> tuple[FloatArray | None, FloatArray | None]:
+        """Per-basis discrepancy variances ``r_o tau_j^-1`` from the outputs' ``r``:
+        the part over the periods' conditions and the part independent between periods."""
         obs = self.observations
         if obs is None or not obs.delta_outputs:
-            return None
+            return None, None
         variances = np.array([k.variance for k in self.algebra.data.kernels])
-        out = np.zeros(variances.size)
-        for q, r in zip(obs.delta_outputs, rel, strict=True):
-            bases = list(obs.outputs[q].bases)
-            out[bases] = float(r) * variances[bases]
-        return out
+        return obs.discrepancy_variances(rel, variances)
 
     def _observed(self, phi: FloatArray) -> tuple[CalibrationAlgebra, list[GlsPieces]]:
         """The algebra with the AR(1) outputs' GLS weights at ``phi``, and their pieces."""

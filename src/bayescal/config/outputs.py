@@ -44,13 +44,18 @@ class OutputError(Section):
         default=None,
     )
 
-    discrepancy: bool = field_doc(
-        "Add a model discrepancy to this output inside the calibration's likelihood: a "
-        "Gaussian process over the periods' conditions x with the emulator's correlation "
-        "and a sampled variance (log-uniform prior from 1e-4 to 1 of the emulator's). "
-        "Systematic misfit then widens the parameters' intervals instead of biasing "
-        "them with false confidence.",
+    discrepancy: bool | Literal["conditions", "independent", "both"] = field_doc(
+        "Add a model discrepancy to this output inside the calibration's likelihood. "
+        "true or 'conditions': a Gaussian process over the periods' conditions x with the "
+        "emulator's correlation and a sampled variance (log-uniform prior from 1e-4 to 1 of "
+        "the emulator's), so similar days share their misfit; 'independent': a misfit of "
+        "its own in every period (no correlation between periods), which a test day cannot "
+        "borrow from the training days; 'both': their sum, each variance sampled. "
+        "Systematic misfit then widens the parameters' intervals instead of biasing them "
+        "with false confidence. Choose by cross-validation on the training periods "
+        "(bayescal compare).",
         True,
+        "both",
         default=False,
     )
 
@@ -120,6 +125,19 @@ class OutputsSection(Section):
                 if name not in self.held_out
             },
         }
+
+    def phase_problems(self, phase: bool) -> list[str]:
+        """What the difference-process phase (``phase``: ``[discrepancy] enabled``) refuses:
+        an in-likelihood discrepancy other than over the conditions."""
+        if not phase:
+            return []
+        return [
+            f"outputs.errors.{name}.discrepancy: {spec.discrepancy!r} does not combine with "
+            "the difference-process phase ([discrepancy] enabled), which takes a discrepancy "
+            "over the conditions only; use discrepancy = true, or turn the phase off"
+            for name, spec in self.errors.items()
+            if spec.discrepancy not in (False, True, "conditions")
+        ]
 
     def relative(self, name: str) -> bool:
         """Whether output ``name`` has errors proportional to its level."""

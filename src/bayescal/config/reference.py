@@ -21,6 +21,7 @@ from bayescal.clock import format_duration
 from bayescal.config import data as cfg_data
 from bayescal.config import energyplus as cfg_energyplus
 from bayescal.config import external as cfg_external
+from bayescal.config import outputs as cfg_outputs
 from bayescal.config import parameters as cfg_parameters
 from bayescal.config import screening as cfg_screening
 from bayescal.config import simulators as cfg_simulators
@@ -47,6 +48,7 @@ _SECTIONS: list[tuple[str, type[BaseModel], str]] = [
     ('prior = { distribution = "uniform", ... }', cfg_parameters.UniformPriorSpec, ""),
     ('prior = { distribution = "beta", ... }', cfg_parameters.BetaPriorSpec, ""),
     ("[outputs]", cfg_study.OutputsSection, ""),
+    ("[outputs.errors.<name>]", cfg_outputs.OutputError, ""),
     ("[periods]", cfg_study.PeriodsSection, ""),
     ("[design]", cfg_study.DesignSection, ""),
     ("[emulator]", cfg_study.EmulatorSection, ""),

@@ -575,7 +575,7 @@ def _aggregate_problems(study: Study) -> list[str]:
 
 
 def _output_problems(study: Study) -> list[str]:
-    problems = []
+    problems = study.outputs.phase_problems(study.discrepancy.enabled)
     produced, sim = study.simulator.output_names(), study.simulator.type
     for name in study.outputs.calibrate:
         if name not in study.data.columns:

@@ -306,11 +306,13 @@ def _delta_variances(
     if not observations.delta_outputs:
         return None
     variances = np.array([k.variance for k in emulator.kernels])
-    out = np.zeros(variances.size)
-    for q, r in zip(observations.delta_outputs, fixed.delta_rel, strict=True):
-        bases = list(observations.outputs[q].bases)
-        out[bases] = r * variances[bases]
-    return out
+    over_conditions, independent = observations.discrepancy_variances(fixed.delta_rel, variances)
+    if independent is not None:
+        raise ConfigError(
+            "the difference-process phase ([discrepancy] enabled) takes an in-likelihood "
+            "discrepancy over the conditions only; set discrepancy = true, or turn the phase off"
+        )
+    return over_conditions
 
 
 def estimate_discrepancy(

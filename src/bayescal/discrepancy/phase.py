@@ -95,7 +95,7 @@ class FixedPrecisions:
     ) -> FixedPrecisions:
         """Posterior means, after checking the posterior's layout against the error models."""
         n_out = observations.n_outputs
-        n_phi, n_rel = len(observations.ar_outputs), len(observations.delta_outputs)
+        n_phi, n_rel = len(observations.ar_outputs), len(observations.delta_coordinates)
         expected = 1 + n_out + n_phi + n_rel
         names = posterior.aux_names
         if len(names) != expected or posterior.aux.shape[-1] != expected:

@@ -51,6 +51,7 @@ from bayescal.emulator.kernel import FloatArray
 from bayescal.emulator.noise import (
     DEFAULT_NOISE_PRIOR,
     RELATIVE_UNIT,
+    DiscrepancyKind,
     ErrorModel,
     ObservationModel,
     OutputNoise,
@@ -77,8 +78,9 @@ class NoiseSpec:
         high)``, in the output's unit; ``None``: a weak default prior
         (:data:`~bayescal.emulator.noise.DEFAULT_NOISE_PRIOR`). [unit]
     discrepancy
-        Whether to add a model discrepancy over the periods' conditions
-        (:class:`~bayescal.emulator.noise.OutputNoise`).
+        Whether to add a model discrepancy, and which: ``True`` or
+        ``"conditions"`` over the periods' conditions, ``"independent"``
+        between periods, ``"both"`` (:class:`~bayescal.emulator.noise.OutputNoise`).
     relative
         Whether the output's values are ``log(y + floor)``
         (:class:`~bayescal.emulator.noise.LogLevel`, applied by the caller):
@@ -87,7 +89,7 @@ class NoiseSpec:
 
     model: ErrorModel = "white"
     sd: float | tuple[float, float] | None = None
-    discrepancy: bool = False
+    discrepancy: bool | DiscrepancyKind = False
     relative: bool = False
 
 

@@ -51,6 +51,7 @@ from bayescal.errors import ConfigError, DataError
 
 __all__ = [
     "DEFAULT_NOISE_PRIOR",
+    "DISCREPANCY_PARTS",
     "RELATIVE_UNIT",
     "ErrorModel",
     "GlsPieces",
@@ -73,6 +74,18 @@ PHI_MAX = 0.999
 #: Range of the relative variance ``r`` of a model discrepancy (log-uniform prior):
 #: from negligible to as large as the emulator's prior variance of a weight.
 DELTA_RANGE = (1e-4, 1.0)
+
+DeltaCoordinate = Literal["delta_rel", "delta_ind"]
+DiscrepancyKind = Literal["conditions", "independent", "both"]
+
+#: The variance coordinates of each kind of in-likelihood discrepancy:
+#: ``delta_rel`` scales the GP over the periods' conditions, ``delta_ind`` the
+#: part independent from period to period.
+DISCREPANCY_PARTS: dict[str, tuple[DeltaCoordinate, ...]] = {
+    "conditions": ("delta_rel",),
+    "independent": ("delta_ind",),
+    "both": ("delta_rel", "delta_ind"),
+}
 
 
 #: The unit of an output with relative errors: its noise SD is a fraction of the level.
@@ -179,9 +192,13 @@ class OutputNoise:
         The output's unit, for reports.
     discrepancy
         Whether the observed weights of this output also carry a model
-        discrepancy ``GP(0, r tau_j^-1 c_x)`` over the periods' conditions, its
-        relative variance ``r`` sampled (Kennedy and O'Hagan's ``delta(x)``
-        inside the likelihood; the paper's difference process is separate).
+        discrepancy (Kennedy and O'Hagan's ``delta(x)`` inside the likelihood;
+        the paper's difference process is separate), and which: ``"conditions"``
+        (or ``True``) a GP ``GP(0, r tau_j^-1 c_x)`` over the periods'
+        conditions, ``"independent"`` one independent from period to period
+        (covariance ``r_0 tau_j^-1`` within a period, none between periods),
+        ``"both"`` their sum, each relative variance sampled (coordinates
+        ``delta_rel`` and ``delta_ind``); ``False``: none.
     """
 
     name: str
@@ -191,11 +208,18 @@ class OutputNoise:
     prior: tuple[float, float] = DEFAULT_NOISE_PRIOR
     scale: float = 1.0
     unit: str = ""
-    discrepancy: bool = False
+    discrepancy: bool | DiscrepancyKind = False
 
     def __post_init__(self) -> None:
         if self.model not in ("white", "ar1"):
             raise ConfigError(f"error model must be 'white' or 'ar1', got {self.model!r}")
+        if self.discrepancy is True:
+            object.__setattr__(self, "discrepancy", "conditions")
+        elif self.discrepancy not in (False, *DISCREPANCY_PARTS):
+            raise ConfigError(
+                f"discrepancy must be true, false or one of {', '.join(DISCREPANCY_PARTS)}, "
+                f"got {self.discrepancy!r}"
+            )
         shape, rate = self.prior
         if not (math.isfinite(shape) and shape > 0.0 and math.isfinite(rate) and rate > 0.0):
             raise ConfigError(
@@ -214,6 +238,12 @@ class OutputNoise:
     def p(self) -> int:
         """Basis vectors ``p_o``."""
         return len(self.bases)
+
+    @property
+    def delta_parts(self) -> tuple[DeltaCoordinate, ...]:
+        """The discrepancy's variance coordinates: ``delta_rel`` (over the conditions)
+        and/or ``delta_ind`` (independent between periods), in that order."""
+        return DISCREPANCY_PARTS.get(str(self.discrepancy), ()) if self.discrepancy else ()
 
 
 @dataclass(frozen=True)
@@ -342,8 +372,13 @@ class ObservationModel:
 
     @cached_property
     def delta_outputs(self) -> tuple[int, ...]:
-        """Indices of the outputs with a model discrepancy (one ``r`` coordinate each)."""
+        """Indices of the outputs with a model discrepancy (one or two ``r`` coordinates)."""
         return tuple(q for q, o in enumerate(self.outputs) if o.discrepancy)
+
+    @cached_property
+    def delta_coordinates(self) -> tuple[tuple[DeltaCoordinate, int], ...]:
+        """``(kind, output)`` of every discrepancy variance coordinate, in order."""
+        return tuple((kind, q) for q in self.delta_outputs for kind in self.outputs[q].delta_parts)
 
     @cached_property
     def _lag_sums(self) -> dict[int, _LagSums]:
@@ -368,16 +403,50 @@ class ObservationModel:
         """Coordinate names of the precisions, AR coefficients and discrepancy variances."""
         lam = [self.coordinate("lambda_star", q) for q in range(self.n_outputs)]
         phi = [self.coordinate("phi", q) for q in self.ar_outputs]
-        rel = [self.coordinate("delta_rel", q) for q in self.delta_outputs]
+        rel = [self.coordinate(kind, q) for kind, q in self.delta_coordinates]
         return (*lam, *phi, *rel)
 
-    def coordinate(self, kind: Literal["lambda_star", "phi", "delta_rel"], q: int) -> str:
+    def coordinate(
+        self, kind: Literal["lambda_star", "phi", "delta_rel", "delta_ind"], q: int
+    ) -> str:
         """Name of output ``q``'s ``lambda*``, AR(1) ``phi`` or discrepancy ``r`` coordinate."""
         if kind == "phi" and q not in self.ar_outputs:
             raise ValueError(f"output {self.outputs[q].name!r} has no AR(1) errors")
-        if kind == "delta_rel" and q not in self.delta_outputs:
-            raise ValueError(f"output {self.outputs[q].name!r} has no discrepancy")
+        if kind in ("delta_rel", "delta_ind") and kind not in self.outputs[q].delta_parts:
+            raise ValueError(f"output {self.outputs[q].name!r} has no {kind} discrepancy part")
         return kind if self.n_outputs == 1 else f"{kind}_{self.outputs[q].name}"
+
+    def discrepancy_variances(
+        self, rel: ArrayLike, variances: ArrayLike
+    ) -> tuple[FloatArray | None, FloatArray | None]:
+        """Per-basis discrepancy variances ``r tau_j^-1`` ``(p,)`` of the two parts.
+
+        Parameters
+        ----------
+        rel
+            The discrepancy coordinates, in the order of :attr:`delta_coordinates`. [-]
+        variances
+            ``1 / tau_j`` of every basis ``(p,)``. [-]
+
+        Returns
+        -------
+        over_conditions, independent
+            The part over the periods' conditions (``delta_rel``) and the part
+            independent between periods (``delta_ind``); ``None`` where no output
+            has that part.
+        """
+        values = np.asarray(rel, dtype=float).reshape(-1)
+        var = np.asarray(variances, dtype=float)
+        if values.size != len(self.delta_coordinates):
+            raise ValueError(
+                f"expected {len(self.delta_coordinates)} discrepancy coordinates, got {values.size}"
+            )
+        parts: dict[str, FloatArray] = {}
+        for (kind, q), r in zip(self.delta_coordinates, values, strict=True):
+            bases = list(self.outputs[q].bases)
+            out = parts.setdefault(kind, np.zeros(var.size))
+            out[bases] = r * var[bases]
+        return parts.get("delta_rel"), parts.get("delta_ind")
 
     # ------------------------------------------------------------ white outputs
 

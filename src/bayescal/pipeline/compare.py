@@ -127,7 +127,8 @@ def _settings(study: Study) -> dict[str, str]:
         spec = study.outputs.errors.get(name, OutputError())
         text = f"{name} {spec.model}"
         if spec.discrepancy:
-            text += "+discrepancy"
+            kind = spec.discrepancy
+            text += "+discrepancy" + ("" if kind in (True, "conditions") else f" ({kind})")
         if spec.relative:
             text += " relative"
         if spec.sd is not None:
@@ -227,7 +228,10 @@ def _score(
         raise ConfigError(f"{label}: the calibrate stage did not finish")
     obs = em.assembled.observations
     algebra = ctx.study.emulator.algebra
-    key = digest("leave-period-out", stage_keys(ctx)["calibrate"], draws_per_chain)
+    # scores of a discrepancy over the conditions became kriged (2026-11-27): a new key
+    kriged = any(kind == "delta_rel" for kind, _ in obs.delta_coordinates)
+    marker = ("discrepancy kriged",) if kriged else ()
+    key = digest("leave-period-out", stage_keys(ctx)["calibrate"], draws_per_chain, *marker)
     path = ctx.out / crossval_store.FILE
     scores = crossval_store.load_scores(path, key)
     if scores is None:

@@ -123,7 +123,7 @@ def uncertainty_section(
             rows.append(
                 [
                     o.name,
-                    o.model + (" + discrepancy" if o.discrepancy else ""),
+                    o.model + (f" + discrepancy ({o.discrepancy})" if o.discrepancy else ""),
                     f"{np.mean(sd):.4g} {o.unit}",
                     f"[{low:.4g}, {high:.4g}]",
                     "–" if in_band is None else f"{float(in_band):.4g} {o.unit}",

@@ -78,8 +78,14 @@ def _aux_description(name: str) -> str:
     if name.startswith("delta_rel"):
         which = name.removeprefix("delta_rel").lstrip("_") or "the output"
         return (
-            f"variance of the model discrepancy of {which} relative to the emulator's "
-            "prior variance of a weight"
+            f"variance of the model discrepancy of {which} over the periods' conditions, "
+            "relative to the emulator's prior variance of a weight"
+        )
+    if name.startswith("delta_ind"):
+        which = name.removeprefix("delta_ind").lstrip("_") or "the output"
+        return (
+            f"variance of the model discrepancy of {which} independent between periods, "
+            "relative to the emulator's prior variance of a weight"
         )
     which = name.removeprefix("phi").lstrip("_") or "the output"
     return f"AR(1) coefficient of the measurement errors of {which} within a period"
