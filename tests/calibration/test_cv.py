@@ -214,16 +214,32 @@ def test_psis_matches_an_exact_refit(small_wall: Wall, wall_posterior: Posterior
     assert scores.log_jacobian == pytest.approx(-np.sum(np.log(em.outputs.sd)))
     assert np.all(scores.pointwise <= scores.lppd + 1e-9)  # leaving out never helps
     assert scores.p_loo > 0.0
+    # The bands of a period the calibration did not see hold their rates on this known
+    # truth (white noise, white model): within 3.5 binomial SEs of the n samples.
+    assert scores.pit.shape == a.observations.y_star.shape
+    n = scores.pit.size
+    for level in (0.95, 0.5):
+        se = np.sqrt(level * (1.0 - level) / n)
+        assert abs(scores.band_coverage(level) - level) < 3.5 * se, (level, scores.pit)
+    # ... and show it when they do not: the same draws with a noise SD five times too small
+    aux = np.array(wall_posterior.aux, dtype=float, copy=True)
+    aux[..., wall_posterior.aux_names.index("lambda_star")] *= 25.0
+    narrow = dataclasses.replace(wall_posterior, aux=aux)
+    overconfident = cv.leave_period_out(em, a.observations, narrow, draws_per_chain=100)
+    assert overconfident.band_coverage(0.95) < 0.95 - 3.5 * np.sqrt(0.95 * 0.05 / n)
     best = int(np.argmin(scores.pareto_k))
     assert scores.pareto_k[best] < cv.PARETO_K_MAX
-    value, refit = cv.refit_period(
+    value, refit, pit = cv.refit_period(
         em, a.observations, dict(wall_posterior.priors), best,
         n_chains=4, n_burn=200, n_draws=300, seed=5, backend="serial", draws_per_chain=100,
     )  # fmt: skip
     assert refit.unit_draws.shape[:2] == (4, 300)
     # The refit and the importance-sampling estimate agree within their Monte Carlo error.
     assert value == pytest.approx(scores.psis[best], abs=0.15)
-    done = scores.with_refits({best: value}, ["note"])
+    assert pit.shape == (a.observations.y_star.shape[0],)
+    assert np.all((pit > 0.0) & (pit < 1.0))
+    done = scores.with_refits({best: value}, ["note"], {best: pit})
+    np.testing.assert_array_equal(done.pit[:, best], pit)
     assert done.pointwise[best] == value
     assert done.refit_warnings == ("note",)
     assert done.elpd == pytest.approx(scores.elpd - scores.psis[best] + value)

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from scipy import linalg, stats
 
-from bayescal.calibration.loo import elpd, period_log_densities
+from bayescal.calibration.loo import elpd, period_log_densities, period_predictive
 from bayescal.emulator.noise import ObservationModel, OutputNoise
 
 
@@ -87,6 +87,8 @@ def test_a_discrepancy_over_the_conditions_is_kriged_from_the_other_periods(
         values["phi_a"] = phi
     over_x, independent = kind in ("conditions", "both"), kind in ("independent", "both")
     got = period_log_densities(obs, values, mean, var, ktk, variances, obs.ls_weights(), x_corr)
+    # each sample's predictive mean and SD: the same conditional, sample by sample
+    p_mu, p_sd = period_predictive(obs, values, mean, var, variances, obs.ls_weights(), x_corr)
     # output a: all periods' samples at once (period-major), conditioned period by period
     ka, n = k[:7, :2], 7
     cov = np.zeros((m * n, m * n))
@@ -109,6 +111,10 @@ def test_a_discrepancy_over_the_conditions_is_kriged_from_the_other_periods(
         c_b = kb @ np.diag(var[i, 2:]) @ kb.T + np.eye(5) / 4.0
         want += stats.multivariate_normal(kb @ mean[i, 2:], c_b).logpdf(y[7:, i])
         assert got[i] == pytest.approx(want, rel=1e-9)
+        np.testing.assert_allclose(p_mu[:7, i], c_mean, rtol=1e-9, atol=1e-12)
+        np.testing.assert_allclose(p_sd[:7, i] ** 2, np.diagonal(c_cov), rtol=1e-9)
+        np.testing.assert_allclose(p_mu[7:, i], kb @ mean[i, 2:], rtol=1e-12)
+        np.testing.assert_allclose(p_sd[7:, i] ** 2, np.diagonal(c_b), rtol=1e-12)
     # the other periods moved the score where the discrepancy is correlated (can fail)
     marginal = period_log_densities(obs, values, mean, var, ktk, variances, obs.ls_weights())
     assert np.any(np.abs(got - marginal) > 1e-3) == over_x

@@ -20,12 +20,12 @@ from bayescal.emulator.noise import ObservationModel, OutputNoise
 from bayescal.errors import ConfigError
 from bayescal.examples import copy_example
 
-OUTPUT = "temp_air_in"
+OUTPUT = "heating_power"
 
 
 def _with_kind(tmp_path: Path, value: str, phase: bool = False) -> Path:
-    """The free-float box example with ``discrepancy = value`` (and the phase on)."""
-    folder = copy_example("box-freefloat", tmp_path / "box")
+    """The co-heating box example with ``discrepancy = value`` (and the phase on)."""
+    folder = copy_example("box-coheating", tmp_path / "box")
     path = folder / "study.toml"
     text = path.read_text(encoding="utf-8")
     assert text.count("\ndiscrepancy = true") == 1
@@ -47,8 +47,14 @@ def test_the_study_file_states_the_kind(tmp_path: Path, kind: str) -> None:
 
 def test_true_is_kept_as_written(tmp_path: Path) -> None:
     # the shipped examples say true: their stage keys must not change
-    study = load_study(copy_example("box-freefloat", tmp_path / "box"))
+    study = load_study(copy_example("box-coheating", tmp_path / "box"))
     assert study.outputs.calibration_dump()["errors"][OUTPUT]["discrepancy"] is True
+
+
+def test_the_free_float_example_declares_both(tmp_path: Path) -> None:
+    # chosen on its training days (docs/case-studies.md)
+    study = load_study(copy_example("box-freefloat", tmp_path / "ff"))
+    assert study.outputs.errors["temp_air_in"].discrepancy == "both"
 
 
 def test_an_unknown_kind_is_refused(tmp_path: Path) -> None:

@@ -59,7 +59,7 @@ from bayescal.calibration.kron import (
     KronCalibrationDensity,
     make_algebra,
 )
-from bayescal.calibration.loo import PARETO_K_MAX, pointwise_log_likelihood
+from bayescal.calibration.loo import PARETO_K_MAX, loo_pit, pointwise_scores
 from bayescal.calibration.posterior import Posterior
 from bayescal.calibration.target import BatchedPosterior, CalibrationPosterior, Moves, sample
 from bayescal.design import Prior
@@ -209,6 +209,11 @@ class PeriodScores:
         Posterior draws the PSIS estimates used.
     refit_warnings
         Convergence warnings of the refits' chains.
+    pit
+        Probability integral transform of every measured sample of every training
+        period under the calibration without that period ``(n, m*)``
+        (:func:`~bayescal.calibration.loo.loo_pit`; a refit's draws where the
+        period was refitted); empty where not computed.
     """
 
     psis: FloatArray
@@ -218,6 +223,7 @@ class PeriodScores:
     log_jacobian: float
     draws: int
     refit_warnings: tuple[str, ...] = ()
+    pit: FloatArray = dataclasses.field(default_factory=lambda: np.zeros((0, 0)))
 
     @property
     def n_periods(self) -> int:
@@ -276,12 +282,36 @@ class PeriodScores:
         need = np.flatnonzero(self.psis_only)
         return [int(i) for i in need[np.argsort(-self.pareto_k[need], kind="stable")]]
 
-    def with_refits(self, values: dict[int, float], notes: Sequence[str] = ()) -> PeriodScores:
-        """The same scores with exact refit values (physical units) for some periods."""
+    def with_refits(
+        self,
+        values: dict[int, float],
+        notes: Sequence[str] = (),
+        pits: dict[int, FloatArray] | None = None,
+    ) -> PeriodScores:
+        """The same scores with exact refit values (physical units) for some periods,
+        and the PIT of their samples under the refits (``pits``: period -> ``(n,)``)."""
         refit = self.refit.copy()
         for i, value in values.items():
             refit[i] = value
-        return dataclasses.replace(self, refit=refit, refit_warnings=(*self.refit_warnings, *notes))
+        pit = self.pit.copy()
+        for i, column in (pits or {}).items():
+            if pit.size:
+                pit[:, i] = column
+        return dataclasses.replace(
+            self, refit=refit, refit_warnings=(*self.refit_warnings, *notes), pit=pit
+        )
+
+    def band_coverage(self, level: float) -> float:
+        """Share of the training samples inside the central ``level`` band of their
+        period's leave-one-out prediction (NaN without PIT values).
+
+        The band of a period the calibration did not see: measured on the training
+        periods alone, it says before the test window is read whether the bands of
+        new periods hold their rate (what a sample inside means: ``|PIT - 1/2| <
+        level / 2``)."""
+        if not self.pit.size:
+            return math.nan
+        return float(np.mean(np.abs(self.pit - 0.5) < 0.5 * level))
 
 
 def _relative_efficiency(posterior: Posterior) -> float:
@@ -335,7 +365,7 @@ def leave_period_out(
         Progress: called with the number of periods done.
     """
     post = thinned(posterior, draws_per_chain)
-    loglik = pointwise_log_likelihood(emulator, observations, post, post.unit_draws.shape[1])
+    loglik, mu, sd = pointwise_scores(emulator, observations, post, post.unit_draws.shape[1])
     chains, draws, m = loglik.shape
     flat = loglik.reshape(-1, m)  # (S, m*)
     points = np.concatenate([post.unit_draws, post.aux], axis=-1).reshape(chains * draws, -1)
@@ -357,6 +387,13 @@ def leave_period_out(
     jac = log_jacobian(emulator.outputs.sd)
     psis = logsumexp(np.asarray(log_w) + flat.T, axis=1) + jac
     lppd = logsumexp(flat, axis=0) - math.log(flat.shape[0]) + jac
+    n = observations.y_star.shape[0]
+    pit = loo_pit(
+        observations.y_star,
+        mu.reshape(-1, n, m),
+        sd.reshape(-1, n, m),
+        np.asarray(log_w).reshape(m, -1),
+    )
     return PeriodScores(
         psis=np.asarray(psis, dtype=float),
         pareto_k=k,
@@ -364,6 +401,7 @@ def leave_period_out(
         refit=np.full(m, np.nan),
         log_jacobian=jac,
         draws=int(flat.shape[0]),
+        pit=pit,
     )
 
 
@@ -382,13 +420,14 @@ def refit_period(
     draws_per_chain: int = 250,
     callback: Tick | None = None,
     moves: Moves = "gibbs",
-) -> tuple[float, Posterior]:
+) -> tuple[float, Posterior, FloatArray]:
     """``elpd_i`` of ``period`` by an exact refit without its measurements (physical units).
 
     Metropolis-within-Gibbs chains (:func:`bayescal.calibration.target.sample`)
     sample :func:`held_out_target`; the period's density is averaged over
-    their draws (thinned to ``draws_per_chain``). Returns the value and the
-    refit's posterior (its ``warnings`` say whether the chains converged).
+    their draws (thinned to ``draws_per_chain``). Returns the value, the
+    refit's posterior (its ``warnings`` say whether the chains converged) and
+    the PIT of the period's samples under it ``(n,)``.
 
     Parameters
     ----------
@@ -437,10 +476,12 @@ def refit_period(
         noise=observations.outputs,
     )
     post = thinned(refit, draws_per_chain)
-    loglik = pointwise_log_likelihood(emulator, observations, post, post.unit_draws.shape[1])
+    loglik, mu, sd = pointwise_scores(emulator, observations, post, post.unit_draws.shape[1])
     column = loglik[..., period].reshape(-1)
     value = float(logsumexp(column)) - math.log(column.size)
-    return value + log_jacobian(emulator.outputs.sd), refit
+    n, m = observations.y_star.shape
+    pit = loo_pit(observations.y_star, mu.reshape(-1, n, m), sd.reshape(-1, n, m))[:, period]
+    return value + log_jacobian(emulator.outputs.sd), refit, pit
 
 
 def paired_difference(best: ArrayLike, other: ArrayLike) -> tuple[float, float]:

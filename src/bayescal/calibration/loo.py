@@ -16,7 +16,7 @@ lambda*``), plus the out-of-basis remainder of :mod:`bayescal.emulator.noise`
 (so the density is that of the measured samples, comparable across error models
 and bases). A discrepancy over the periods' conditions, ``GP(0, r tau^-1 c_x)``,
 is kriged from the other training periods' residuals, as the predictions
-condition it on the training residuals (:func:`kriged_in_basis`); the other
+condition it on the training residuals (:func:`loo_conditional`); the other
 measured periods enter nowhere else.
 
 :func:`elpd` estimates the expected log predictive density of a left-out period
@@ -32,6 +32,8 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy import special
+from scipy.special import logsumexp
 
 from bayescal.calibration.posterior import Posterior
 from bayescal.emulator.gp import Emulator
@@ -39,7 +41,16 @@ from bayescal.emulator.kernel import LOG_2PI
 from bayescal.emulator.noise import ObservationModel, ar1_whiten
 from bayescal.mcmc.diagnostics import import_arviz
 
-__all__ = ["Elpd", "elpd", "period_log_densities", "pointwise_log_likelihood"]
+__all__ = [
+    "Elpd",
+    "elpd",
+    "loo_conditional",
+    "loo_pit",
+    "period_log_densities",
+    "period_predictive",
+    "pointwise_log_likelihood",
+    "pointwise_scores",
+]
 
 FloatArray = NDArray[np.float64]
 #: Pareto k above which PSIS-LOO is unreliable for a period (Vehtari et al. 2017).
@@ -69,15 +80,30 @@ def pointwise_log_likelihood(
     draws_per_chain
         Draws per chain used (thinned evenly).
     """
+    return pointwise_scores(emulator, observations, posterior, draws_per_chain)[0]
+
+
+def pointwise_scores(
+    emulator: Emulator,
+    observations: ObservationModel,
+    posterior: Posterior,
+    draws_per_chain: int = 250,
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """``l_is`` ``(chains, draws, m*)`` and every sample's left-out predictive mean and
+    SD at every draw ``(chains, draws, n, m*)`` each (:func:`period_predictive`;
+    standardised units).
+    """
     chains, n_draws = posterior.unit_draws.shape[:2]
     pick = _thin(n_draws, draws_per_chain)
     unit = posterior.unit_draws[:, pick]
     aux = posterior.aux[:, pick]
     names = posterior.aux_names
     obs = observations
-    m = obs.y_star.shape[1]
+    n, m = obs.y_star.shape
     x = emulator.x
     out = np.empty((chains, pick.size, m))
+    mus = np.empty((chains, pick.size, n, m))
+    sds = np.empty((chains, pick.size, n, m))
     ktk = emulator.basis.ktk
     variances = np.array([k.variance for k in emulator.kernels])
     ls_weights = obs.ls_weights()
@@ -90,7 +116,39 @@ def pointwise_log_likelihood(
             out[c, s] = period_log_densities(
                 obs, values, mean, var, ktk, variances, ls_weights, x_corr
             )
-    return out
+            mus[c, s], sds[c, s] = period_predictive(
+                obs, values, mean, var, variances, ls_weights, x_corr
+            )
+    return out, mus, sds
+
+
+def loo_pit(
+    y: FloatArray, mu: FloatArray, sd: FloatArray, log_weights: FloatArray | None = None
+) -> FloatArray:
+    """Probability integral transform of every left-out sample ``(n, m*)``.
+
+    ``PIT_ti = sum_s w_is Phi((y_ti - mu_sti) / sd_sti)``: the predictive
+    distribution of sample ``t`` of period ``i`` is the mixture over the draws
+    ``s`` of their Gaussians, weighted by the period's normalised importance
+    weights ``w_is`` (``log_weights`` ``(m*, S)``, PSIS) or equally (``None``:
+    draws of a refit without the period). A sample lies inside the central
+    band of level ``L`` exactly when ``|PIT - 1/2| < L/2``.
+
+    Parameters
+    ----------
+    y
+        The measured samples ``(n, m*)``.
+    mu, sd
+        Predictive means and SDs per draw ``(S, n, m*)``.
+    log_weights
+        Log importance weights per period ``(m*, S)``, normalised, or ``None``.
+    """
+    cdf = special.ndtr((np.asarray(y)[None] - mu) / sd)  # (S, n, m*)
+    if log_weights is None:
+        out: FloatArray = cdf.mean(axis=0)
+        return out
+    w = np.exp(np.asarray(log_weights) - logsumexp(log_weights, axis=1, keepdims=True))
+    return np.asarray(np.einsum("is,sti->ti", w, cdf))
 
 
 def period_log_densities(
@@ -123,58 +181,148 @@ def period_log_densities(
     x_corr
         ``c_x`` of every basis over the training periods ``(p, m*, m*)``: a
         discrepancy over the conditions is then kriged from the other periods'
-        residuals, as the predictions do (:func:`kriged_in_basis`); ``None``:
+        residuals, as the predictions do (:func:`loo_conditional`); ``None``:
         its marginal. [-]
     """
-    names = obs.names()
     m = obs.y_star.shape[1]
     total = np.zeros(m)
+    for q in range(obs.n_outputs):
+        part = _OutputPart.of(obs, q, values, mean, var, variances, ls_weights, x_corr)
+        resid, cov = part.left_out()
+        chol = np.linalg.cholesky(cov)
+        half = np.linalg.solve(chol, resid[:, :, None])[:, :, 0]
+        in_basis = -0.5 * (
+            part.p * LOG_2PI
+            + 2.0 * np.sum(np.log(np.diagonal(chol, axis1=1, axis2=2)), axis=1)
+            + np.sum(half * half, axis=1)
+        )
+        total += in_basis + part.remainder()
+    return total
+
+
+def period_predictive(
+    obs: ObservationModel,
+    values: dict[str, float],
+    mean: FloatArray,
+    var: FloatArray,
+    variances: FloatArray,
+    ls_weights: FloatArray,
+    x_corr: FloatArray | None = None,
+) -> tuple[FloatArray, FloatArray]:
+    """Each left-out period's predictive mean and SD of every measured sample at one draw.
+
+    The same prediction as :func:`period_log_densities`, sample by sample: the
+    weights ``z_i`` of the left-out period (the emulator's prediction, a
+    discrepancy kriged from the other periods where one is over the
+    conditions), mapped by the basis, plus the observation noise ``1 / lambda*``
+    (its marginal variance: an AR(1) correlation has a unit diagonal). This is
+    the emulator route's band of section 6 of docs/method.md for a period the
+    calibration did not see.
+
+    Parameters
+    ----------
+    obs, values, mean, var, variances, ls_weights, x_corr
+        As :func:`period_log_densities`.
+
+    Returns
+    -------
+    mu, sd
+        ``(n, m*)`` each, in the standardised units of ``obs.y_star``. [-]
+    """
+    mu = np.empty_like(obs.y_star)
+    sd = np.empty_like(obs.y_star)
     for q, o in enumerate(obs.outputs):
-        lam = values[names[q]]
+        part = _OutputPart.of(obs, q, values, mean, var, variances, ls_weights, x_corr)
+        resid, cov = part.left_out()
+        weights = mean[:, list(o.bases)] + part.diff - resid  # E[z_i | the other periods]
+        cov_z = cov - part.noise[None]
+        rows = slice(*o.rows)
+        mu[rows] = part.kq @ weights.T
+        spread = np.einsum("ta,iab,tb->ti", part.kq, cov_z, part.kq)
+        sd[rows] = np.sqrt(np.maximum(spread, 0.0) + 1.0 / part.lam)
+    return mu, sd
+
+
+@dataclass(frozen=True)
+class _OutputPart:
+    """One output's pieces of a left-out period's prediction at one draw."""
+
+    kq: FloatArray  # K_o (n_o, p_o)
+    diff: FloatArray  # measured minus predicted weights (m*, p_o)
+    own: FloatArray  # covariance of a period's true weights alone (m*, p_o, p_o)
+    noise: FloatArray  # the observed weights' noise (p_o, p_o)
+    kriged: FloatArray | None  # r tau^-1 c_x per basis (p_o, m*, m*), or None
+    lam: float
+    rss: FloatArray  # out-of-basis sum of squares per period (m*,)
+    logdets: tuple[float, float]  # log|R|, log|H0|
+    n: int
+
+    @property
+    def p(self) -> int:
+        return int(self.kq.shape[1])
+
+    @classmethod
+    def of(
+        cls,
+        obs: ObservationModel,
+        q: int,
+        values: dict[str, float],
+        mean: FloatArray,
+        var: FloatArray,
+        variances: FloatArray,
+        ls_weights: FloatArray,
+        x_corr: FloatArray | None,
+    ) -> _OutputPart:
+        o = obs.outputs[q]
+        lam = float(values[obs.names()[q]])
         bases = list(o.bases)
-        cov = np.zeros((m, o.p, o.p))
-        cov[:, np.arange(o.p), np.arange(o.p)] = var[:, bases]
+        m = obs.y_star.shape[1]
+        own = np.zeros((m, o.p, o.p))
+        own[:, np.arange(o.p), np.arange(o.p)] = var[:, bases]
         kriged = None
         for kind in o.delta_parts:
             r = values[obs.coordinate(kind, q)]
             if kind == "delta_rel" and x_corr is not None:
                 kriged = (r * variances[bases])[:, None, None] * x_corr[bases]
             else:  # independent between periods, or no correlation given: its marginal
-                cov[:, np.arange(o.p), np.arange(o.p)] += r * variances[bases]
+                own[:, np.arange(o.p), np.arange(o.p)] += r * variances[bases]
         kq, yq = obs.block(q)
         if o.model == "ar1":
             phi = values[obs.coordinate("phi", q)]
             piece = obs.gls(q, phi)
-            w_hat = piece.w_hat
-            cov += piece.h0_inv / lam
-            logdet_r, logdet_h0 = piece.logdet_r, piece.logdet_h0
+            w_hat, noise = piece.w_hat, piece.h0_inv / lam
+            logdets = (piece.logdet_r, piece.logdet_h0)
             resid = ar1_whiten(yq, phi) - ar1_whiten(kq, phi) @ w_hat.T
         else:  # H0 = K^T K (diagonal for the GPMSA basis, whose vectors are orthogonal)
             w_hat = ls_weights[:, bases]
             gram = kq.T @ kq
-            cov += np.linalg.inv(gram)[None] / lam
-            logdet_r, logdet_h0 = 0.0, float(np.linalg.slogdet(gram)[1])
+            noise = np.asarray(np.linalg.inv(gram) / lam, dtype=float)
+            logdets = (0.0, float(np.linalg.slogdet(gram)[1]))
             resid = yq - kq @ w_hat.T
         rss = np.sum(resid * resid, axis=0)  # per period
-        diff = w_hat - mean[:, bases]
-        if kriged is not None:
-            in_basis = kriged_in_basis(diff, kriged, cov)
-        else:
-            chol = np.linalg.cholesky(cov)
-            half = np.linalg.solve(chol, diff[:, :, None])[:, :, 0]
-            in_basis = -0.5 * (
-                o.p * LOG_2PI
-                + 2.0 * np.sum(np.log(np.diagonal(chol, axis1=1, axis2=2)), axis=1)
-                + np.sum(half * half, axis=1)
-            )
-        dof = o.n - o.p
-        remainder = -0.5 * (dof * (LOG_2PI - math.log(lam)) + logdet_r + logdet_h0 + lam * rss)
-        total += in_basis + remainder
-    return total
+        return cls(kq, w_hat - mean[:, bases], own, noise, kriged, lam, rss, logdets, o.n)
+
+    def left_out(self) -> tuple[FloatArray, FloatArray]:
+        """Each period's measured weights minus their prediction from the others, and its
+        covariance: ``(m*, p_o)``, ``(m*, p_o, p_o)``."""
+        blocks = self.own + self.noise[None]
+        if self.kriged is None:
+            return self.diff, blocks
+        return loo_conditional(self.diff, self.kriged, blocks)
+
+    def remainder(self) -> FloatArray:
+        """The out-of-basis term of each period (eq. 7 with the error correlation)."""
+        dof = self.n - self.p
+        logdet_r, logdet_h0 = self.logdets
+        return -0.5 * (
+            dof * (LOG_2PI - math.log(self.lam)) + logdet_r + logdet_h0 + self.lam * self.rss
+        )
 
 
-def kriged_in_basis(diff: FloatArray, prior: FloatArray, blocks: FloatArray) -> FloatArray:
-    """Log density of each period's weights given every other period's ``(m*,)``.
+def loo_conditional(
+    diff: FloatArray, prior: FloatArray, blocks: FloatArray
+) -> tuple[FloatArray, FloatArray]:
+    """Each period's residual weights given every other period's.
 
     The residual weights ``e = w_hat - mu`` ``(m*, p_o)`` are Gaussian with
     covariance ``Sigma = G + blockdiag_i(B_i)``: ``G`` the discrepancy over the
@@ -182,8 +330,13 @@ def kriged_in_basis(diff: FloatArray, prior: FloatArray, blocks: FloatArray) -> 
     ``(m*, p_o, p_o)`` what belongs to period ``i`` alone (the emulator's
     variance, the observed weights' noise, a discrepancy independent between
     periods). Period ``i`` given the others is ``N(e_i - P_ii^-1 u_i, P_ii^-1)``
-    with ``P = Sigma^-1`` and ``u = P e`` (the Gaussian leave-one-out identity),
-    so its log density is ``-(p_o log 2 pi - log|P_ii| + u_i^T P_ii^-1 u_i) / 2``.
+    with ``P = Sigma^-1`` and ``u = P e`` (the Gaussian leave-one-out identity).
+
+    Returns
+    -------
+    resid, cov
+        ``P_ii^-1 u_i`` (``e_i`` minus its prediction from the others) ``(m*, p_o)``
+        and ``P_ii^-1`` ``(m*, p_o, p_o)``.
     """
     m, p = diff.shape
     sigma = np.zeros((m, p, m, p))  # period-major
@@ -193,14 +346,10 @@ def kriged_in_basis(diff: FloatArray, prior: FloatArray, blocks: FloatArray) -> 
     flat = sigma.reshape(m * p, m * p)
     precision = np.linalg.inv(0.5 * (flat + flat.T)).reshape(m, p, m, p)
     u = np.einsum("iajb,jb->ia", precision, diff)
-    out = np.empty(m)
-    for i in range(m):
-        block = 0.5 * (precision[i, :, i, :] + precision[i, :, i, :].T)
-        chol = np.linalg.cholesky(block)
-        half = np.linalg.solve(chol, u[i])  # u_i^T P_ii^-1 u_i = |L^-1 u_i|^2
-        logdet = 2.0 * float(np.sum(np.log(np.diagonal(chol))))
-        out[i] = -0.5 * (p * LOG_2PI - logdet + float(half @ half))
-    return out
+    own = precision[np.arange(m), :, np.arange(m), :]
+    cov = np.linalg.inv(0.5 * (own + np.swapaxes(own, 1, 2)))
+    resid = np.einsum("iab,ib->ia", cov, u)
+    return resid, cov
 
 
 @dataclass(frozen=True)

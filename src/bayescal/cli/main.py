@@ -384,9 +384,11 @@ def compare(
     turn and the measurements of that period are scored by their log density
     under the calibration on the others (PSIS, with exact refits where the
     Pareto k exceeds 0.7). The variants are ranked by the sum, the ELPD, with
-    the difference to the best and its standard error. Only the training
-    periods are read: the test window is left for the final metrics of the
-    variant chosen.
+    the difference to the best and its standard error. Beside them, the share
+    of the training samples inside the 95 % and 50 % bands of their period
+    left out: how the bands of a new period hold, before the test window is
+    read. Only the training periods are read: the test window is left for the
+    final metrics of the variant chosen.
 
     Writes compare.csv (the ranking), compare-periods.csv (every period of
     every variant), compare.png and compare.md into --output; each study keeps

@@ -287,7 +287,7 @@ def comparison_text(table: Any, notes: Sequence[str], files: Mapping[str, Any]) 
     width = max(20, 1 + max(len(str(v)) for v in table["variant"]))
     head = (
         f"{'rank':>4}  {'variant':<{width}}{'ELPD':>11}{'SE':>8}{'diff':>10}{'SE diff':>9}"
-        f"{'p_loo':>8}{'k>0.7':>7}{'refits':>7}"
+        f"{'p_loo':>8}{'k>0.7':>7}{'refits':>7}{'band95':>8}{'band50':>8}"
     )
     lines = [
         f"leave-one-period-out ELPD over {int(table['periods'].iloc[0])} training periods "
@@ -299,6 +299,7 @@ def comparison_text(table: Any, notes: Sequence[str], files: Mapping[str, Any]) 
             f"{int(r['rank']):>4}  {r['variant']!s:<{width}}{r['elpd']:>11.1f}{r['se']:>8.1f}"
             f"{r['elpd_diff']:>10.1f}{r['se_diff']:>9.1f}{r['p_loo']:>8.1f}"
             f"{int(r['k_high']):>7}{int(r['refits']):>7}"
+            f"{r.get('loo_band95', float('nan')):>8.3f}{r.get('loo_band50', float('nan')):>8.3f}"
         )
     lines.append("")
     lines += [
@@ -306,7 +307,8 @@ def comparison_text(table: Any, notes: Sequence[str], files: Mapping[str, Any]) 
     ]
     lines.append(
         f"(a difference counts when it exceeds {SMALL_DIFFERENCE:g} nats and twice its SE; "
-        "the test window was not read)"
+        "band95/band50: share of the training samples inside the 95 %/50 % band of their "
+        "period left out; the test window was not read)"
     )
     lines += [f"note: {n}" for n in notes]
     lines += [f"wrote {path}" for path in files.values()]

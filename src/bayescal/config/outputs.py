@@ -47,7 +47,7 @@ class OutputError(Section):
     discrepancy: bool | Literal["conditions", "independent", "both"] = field_doc(
         "Add a model discrepancy to this output inside the calibration's likelihood. "
         "true or 'conditions': a Gaussian process over the periods' conditions x with the "
-        "emulator's correlation and a sampled variance (log-uniform prior from 1e-4 to 1 of "
+        "emulator's correlation and a sampled variance (log-uniform prior from 1e-8 to 1 of "
         "the emulator's), so similar days share their misfit; 'independent': a misfit of "
         "its own in every period (no correlation between periods), which a test day cannot "
         "borrow from the training days; 'both': their sum, each variance sampled. "

@@ -73,7 +73,12 @@ DEFAULT_NOISE_PRIOR = (0.5, 1e-6)
 PHI_MAX = 0.999
 #: Range of the relative variance ``r`` of a model discrepancy (log-uniform prior):
 #: from negligible to as large as the emulator's prior variance of a weight.
-DELTA_RANGE = (1e-4, 1.0)
+#: "Negligible" is judged against the observed weights' noise, ``1 / (lambda* k^T k)``,
+#: about 1e-6 of a weight's variance with a few hundred samples a period: a floor of
+#: 1e-4 (until 2026-11-27) was not, and held a part the data did not want (the
+#: free-float box's discrepancy of each day's own piled up there, its left-out bands
+#: covering 0.999 / 0.661).
+DELTA_RANGE = (1e-8, 1.0)
 
 DeltaCoordinate = Literal["delta_rel", "delta_ind"]
 DiscrepancyKind = Literal["conditions", "independent", "both"]

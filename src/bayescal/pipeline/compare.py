@@ -256,7 +256,7 @@ def _score(
         total = cal.chains * (cal.burn + cal.samples)
         tick, close = _bar(options, f"{label}: refit without period {i}", total)
         try:
-            value, refit = refit_period(
+            value, refit, pit = refit_period(
                 em.emulator,
                 obs,
                 dict(post.priors),
@@ -273,7 +273,7 @@ def _score(
             )
         finally:
             close()
-        scores = scores.with_refits({i: value}, _refit_note(i, refit.diagnostics))
+        scores = scores.with_refits({i: value}, _refit_note(i, refit.diagnostics), {i: pit})
         crossval_store.save_scores(scores, path, key)
     return scores.shifted(relative_jacobian(ctx))
 
@@ -324,6 +324,8 @@ def _tables(variants: Sequence[Variant], times: list[str]) -> tuple[pd.DataFrame
                 "k_high": int(np.sum(s.high_k)),
                 "refits": int(np.sum(s.refitted)),
                 "psis_only": int(np.sum(s.psis_only)),
+                "loo_band95": s.band_coverage(0.95),
+                "loo_band50": s.band_coverage(0.50),
                 **v.settings,
                 "study": str(v.study.path),
             }
@@ -435,21 +437,25 @@ def compare(
     times = [_when(first.times, int(s)) for s in first.layout.train_starts]
     table, periods = _tables(variants, times)
     notes = _notes(variants, max_refits)
-    files = _write(folder, table, periods, notes)
+    files = _write(folder, table, periods, notes, {v.label: v.scores.pit for v in variants})
     order = {label: k for k, label in enumerate(table["variant"])}
     ranked = tuple(sorted(variants, key=lambda v: order[v.label]))
     return Comparison(ranked, table, periods, tuple(notes), files)
 
 
 def _write(
-    folder: Path, table: pd.DataFrame, periods: pd.DataFrame, notes: list[str]
+    folder: Path,
+    table: pd.DataFrame,
+    periods: pd.DataFrame,
+    notes: list[str],
+    pits: dict[str, np.ndarray],
 ) -> dict[str, Path]:
     try:
         folder.mkdir(parents=True, exist_ok=True)
         files = {
             "table": atomic_write_text(folder / FILES["table"], table.to_csv(index=False)),
             "periods": atomic_write_text(folder / FILES["periods"], periods.to_csv(index=False)),
-            "figure": plot_comparison(folder / FILES["figure"], table, periods),
+            "figure": plot_comparison(folder / FILES["figure"], table, periods, pits),
         }
         text = comparison_markdown(table, periods, notes, FILES["figure"])
         files["summary"] = atomic_write_text(folder / FILES["summary"], text)

@@ -19,6 +19,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from bayescal.emulator.noise import DELTA_RANGE
 from bayescal.runner import forcing_fingerprint, simulator_fingerprint
 
 if TYPE_CHECKING:
@@ -104,6 +105,8 @@ def stage_keys(ctx: Context) -> dict[str, str]:
         keys["emulator"],
         calibration,
         *([dump["derived"]] if s.derived else []),
+        # the discrepancy's variance prior reaches down to 1e-8 (it stopped at 1e-4)
+        *([f"discrepancy from {DELTA_RANGE[0]:g}"] if _likelihood_discrepancy(s) else []),
     )
     keys["discrepancy"] = digest("discrepancy", keys["calibrate"], dump["discrepancy"])
     keys["predict"] = digest(

@@ -46,20 +46,37 @@ def verdict(diff: float, se_diff: float) -> str:
     return f"worse by {diff:.1f} ± {se_diff:.1f} ({ratio:.1f} SE)"
 
 
-def plot_comparison(path: Path, table: pd.DataFrame, periods: pd.DataFrame) -> Path:
-    """ELPD ± SE per variant (and the difference to the best ± its SE); per-period differences.
+def plot_comparison(
+    path: Path,
+    table: pd.DataFrame,
+    periods: pd.DataFrame,
+    pits: dict[str, np.ndarray] | None = None,
+) -> Path:
+    """ELPD ± SE per variant (and the difference to the best ± its SE); per-period
+    differences; the left-out samples' PIT histograms.
 
     Left: each variant's ELPD with its standard error (black) and, below it,
     its difference to the best with the SE of the paired difference (grey).
-    Right: ``elpd_i(variant) - elpd_i(best)`` per training period; filled
+    Middle: ``elpd_i(variant) - elpd_i(best)`` per training period; filled
     squares are periods scored by an exact refit, open circles PSIS estimates
-    whose Pareto ``k`` exceeds 0.7 (unreliable).
+    whose Pareto ``k`` exceeds 0.7 (unreliable). Right (with ``pits``,
+    variant -> PIT of every left-out training sample): their histograms, flat
+    where the bands of a new period mean what they say, U-shaped where they are
+    too narrow, peaked where too wide.
     """
     order = list(table["variant"])
     n = len(order)
-    fig, (left, right) = plt.subplots(
-        1, 2, figsize=(11.0, max(3.0, 1.2 + 0.55 * n)), gridspec_kw={"width_ratios": [1.0, 1.4]}
+    shown = {k: np.asarray(v).ravel() for k, v in (pits or {}).items() if np.size(v)}
+    ratios = [1.0, 1.4, 0.9] if shown else [1.0, 1.4]
+    fig, axes = plt.subplots(
+        1,
+        len(ratios),
+        figsize=(11.0 + 4.0 * bool(shown), max(3.0, 1.2 + 0.55 * n)),
+        gridspec_kw={"width_ratios": ratios},
     )
+    left, right = axes[0], axes[1]
+    if shown:
+        _plot_pits(axes[2], shown, order)
     y = np.arange(n)[::-1].astype(float)
     best = float(table["elpd"].iloc[0])
     left.errorbar(table["elpd"], y, xerr=table["se"], fmt="o", color="black", capsize=3)
@@ -81,6 +98,19 @@ def plot_comparison(path: Path, table: pd.DataFrame, periods: pd.DataFrame) -> P
     _plot_periods(right, periods, order)
     fig.tight_layout()
     return save_figure(fig, path)
+
+
+def _plot_pits(ax: Axes, pits: dict[str, np.ndarray], order: list[str]) -> None:
+    edges = np.linspace(0.0, 1.0, 21)
+    for k, name in enumerate(order):
+        if name in pits:
+            ax.stairs(np.histogram(pits[name], bins=edges, density=True)[0], edges,
+                      color="black" if k == 0 else f"C{k - 1}", label=name)  # fmt: skip
+    ax.axhline(1.0, color="0.5", ls=":", lw=0.8)
+    ax.set_xlabel("PIT of the left-out samples")
+    ax.set_ylabel("density")
+    ax.set_title("flat: bands of a new period hold", fontsize=9)
+    ax.legend(fontsize=7)
 
 
 def _plot_periods(ax: Axes, periods: pd.DataFrame, order: list[str]) -> None:
@@ -107,9 +137,9 @@ def _plot_periods(ax: Axes, periods: pd.DataFrame, order: list[str]) -> None:
         ax.legend(fontsize=8)
 
 
-def _cell(value: object) -> str:
+def _cell(value: object, column: str = "") -> str:
     if isinstance(value, float | np.floating):
-        return f"{float(value):.1f}"
+        return f"{float(value):.3f}" if column.startswith("loo_band") else f"{float(value):.1f}"
     return str(value).replace("|", "\\|")
 
 
@@ -127,6 +157,8 @@ def comparison_markdown(
         "p_loo": "p_loo",
         "k_high": "periods k > 0.7",
         "refits": "refits",
+        "loo_band95": "left-out 95 % band",
+        "loo_band50": "left-out 50 % band",
         "parameters": "parameters",
         "priors": "priors",
         "error_model": "error model",
@@ -145,7 +177,7 @@ def comparison_markdown(
         "|" + "|".join("---" for _ in shown) + "|",
     ]
     for _, row in table.iterrows():
-        lines.append("| " + " | ".join(_cell(row[c]) for c in shown) + " |")
+        lines.append("| " + " | ".join(_cell(row[c], c) for c in shown) + " |")
     lines += ["", "## Reading it", ""]
     for _, row in table.iterrows():
         lines.append(f"- **{row['variant']}**: {verdict(row['elpd_diff'], row['se_diff'])}")
@@ -153,6 +185,14 @@ def comparison_markdown(
         "",
         f"A difference counts when it exceeds both {SMALL_DIFFERENCE:g} nats and twice its "
         "SE; with few training periods the SE itself is rough.",
+        "",
+        "The left-out bands are the share of the training samples inside the central 95 % "
+        "and 50 % band of their period's prediction by the calibration without that period "
+        "(the emulator route's band: parameters, emulator, noise and the discrepancy, "
+        "weighted by PSIS or from the refit): what the bands of a new period should hold, "
+        "measured before the test window is read. Neighbouring samples fall inside or "
+        "outside together, so read them with the few periods' worth of independent "
+        "information they hold.",
         "",
         TEST_WINDOW_TEXT,
     ]

@@ -22,7 +22,7 @@ from bayescal.calibration.cv import PeriodScores
 __all__ = ["FILE", "load_scores", "save_scores"]
 
 FILE = "leave-period-out.npz"
-_FORMAT = 1
+_FORMAT = 2  # 2: the leave-one-out PIT of every sample
 
 
 def save_scores(scores: PeriodScores, path: str | os.PathLike[str], key: str) -> Path:
@@ -39,6 +39,7 @@ def save_scores(scores: PeriodScores, path: str | os.PathLike[str], key: str) ->
             "log_jacobian": np.array(scores.log_jacobian),
             "draws": np.array(scores.draws),
             "refit_warnings": np.array(scores.refit_warnings, dtype=str),
+            "pit": scores.pit,
         },
     )
 
@@ -57,6 +58,7 @@ def load_scores(path: str | os.PathLike[str], key: str) -> PeriodScores | None:
             log_jacobian=float(data["log_jacobian"]),
             draws=int(data["draws"]),
             refit_warnings=tuple(str(w) for w in data["refit_warnings"]),
+            pit=np.asarray(data["pit"], dtype=float),
         )
     except (OSError, ValueError, KeyError, TypeError, EOFError, zipfile.BadZipFile):
         return None
