@@ -33,7 +33,6 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 from scipy import special
-from scipy.special import logsumexp
 
 from bayescal.calibration.posterior import Posterior
 from bayescal.emulator.gp import Emulator
@@ -104,21 +103,17 @@ def pointwise_scores(
     out = np.empty((chains, pick.size, m))
     mus = np.empty((chains, pick.size, n, m))
     sds = np.empty((chains, pick.size, n, m))
-    ktk = emulator.basis.ktk
-    variances = np.array([k.variance for k in emulator.kernels])
+    kernels = emulator.kernels
+    variances = np.array([k.variance for k in kernels])
     ls_weights = obs.ls_weights()
-    over_x = any(kind == "delta_rel" for kind, _ in obs.delta_coordinates)
-    x_corr = np.stack([k.x_corr(x[:m]) for k in emulator.kernels]) if over_x else None
+    x_corr = np.stack([k.x_corr(x[:m]) for k in kernels]) if obs.delta_over_conditions else None
     for c in range(chains):
         for s in range(pick.size):
             mean, var = emulator.predict_weights(np.broadcast_to(unit[c, s], (m, unit.shape[2])), x)
             values = dict(zip(names, aux[c, s], strict=True))
-            out[c, s] = period_log_densities(
-                obs, values, mean, var, ktk, variances, ls_weights, x_corr
-            )
-            mus[c, s], sds[c, s] = period_predictive(
-                obs, values, mean, var, variances, ls_weights, x_corr
-            )
+            parts = _left_out(obs, values, mean, var, variances, ls_weights, x_corr)
+            out[c, s] = _densities(obs, parts)  # period_log_densities, once per draw
+            mus[c, s], sds[c, s] = _predictive(obs, mean, parts)  # period_predictive
     return out, mus, sds
 
 
@@ -147,7 +142,7 @@ def loo_pit(
     if log_weights is None:
         out: FloatArray = cdf.mean(axis=0)
         return out
-    w = np.exp(np.asarray(log_weights) - logsumexp(log_weights, axis=1, keepdims=True))
+    w = np.exp(np.asarray(log_weights) - special.logsumexp(log_weights, axis=1, keepdims=True))
     return np.asarray(np.einsum("is,sti->ti", w, cdf))
 
 
@@ -184,11 +179,31 @@ def period_log_densities(
         residuals, as the predictions do (:func:`loo_conditional`); ``None``:
         its marginal. [-]
     """
-    m = obs.y_star.shape[1]
-    total = np.zeros(m)
+    return _densities(obs, _left_out(obs, values, mean, var, variances, ls_weights, x_corr))
+
+
+def _left_out(
+    obs: ObservationModel,
+    values: dict[str, float],
+    mean: FloatArray,
+    var: FloatArray,
+    variances: FloatArray,
+    ls_weights: FloatArray,
+    x_corr: FloatArray | None,
+) -> list[tuple[_OutputPart, FloatArray, FloatArray]]:
+    """Each output's pieces and its periods' left-out residual weights and covariance."""
+    out = []
     for q in range(obs.n_outputs):
         part = _OutputPart.of(obs, q, values, mean, var, variances, ls_weights, x_corr)
-        resid, cov = part.left_out()
+        out.append((part, *part.left_out()))
+    return out
+
+
+def _densities(
+    obs: ObservationModel, parts: list[tuple[_OutputPart, FloatArray, FloatArray]]
+) -> FloatArray:
+    total = np.zeros(obs.y_star.shape[1])
+    for part, resid, cov in parts:
         chol = np.linalg.cholesky(cov)
         half = np.linalg.solve(chol, resid[:, :, None])[:, :, 0]
         in_basis = -0.5 * (
@@ -229,11 +244,17 @@ def period_predictive(
     mu, sd
         ``(n, m*)`` each, in the standardised units of ``obs.y_star``. [-]
     """
+    return _predictive(obs, mean, _left_out(obs, values, mean, var, variances, ls_weights, x_corr))
+
+
+def _predictive(
+    obs: ObservationModel,
+    mean: FloatArray,
+    parts: list[tuple[_OutputPart, FloatArray, FloatArray]],
+) -> tuple[FloatArray, FloatArray]:
     mu = np.empty_like(obs.y_star)
     sd = np.empty_like(obs.y_star)
-    for q, o in enumerate(obs.outputs):
-        part = _OutputPart.of(obs, q, values, mean, var, variances, ls_weights, x_corr)
-        resid, cov = part.left_out()
+    for o, (part, resid, cov) in zip(obs.outputs, parts, strict=True):
         weights = mean[:, list(o.bases)] + part.diff - resid  # E[z_i | the other periods]
         cov_z = cov - part.noise[None]
         rows = slice(*o.rows)

@@ -380,6 +380,11 @@ class ObservationModel:
         """Indices of the outputs with a model discrepancy (one or two ``r`` coordinates)."""
         return tuple(q for q, o in enumerate(self.outputs) if o.discrepancy)
 
+    @property
+    def delta_over_conditions(self) -> bool:
+        """Whether some output's discrepancy has a part over the periods' conditions."""
+        return any(kind == "delta_rel" for kind, _ in self.delta_coordinates)
+
     @cached_property
     def delta_coordinates(self) -> tuple[tuple[DeltaCoordinate, int], ...]:
         """``(kind, output)`` of every discrepancy variance coordinate, in order."""

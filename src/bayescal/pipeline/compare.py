@@ -229,8 +229,7 @@ def _score(
     obs = em.assembled.observations
     algebra = ctx.study.emulator.algebra
     # scores of a discrepancy over the conditions became kriged (2026-11-27): a new key
-    kriged = any(kind == "delta_rel" for kind, _ in obs.delta_coordinates)
-    marker = ("discrepancy kriged",) if kriged else ()
+    marker = ("discrepancy kriged",) if obs.delta_over_conditions else ()
     key = digest("leave-period-out", stage_keys(ctx)["calibrate"], draws_per_chain, *marker)
     path = ctx.out / crossval_store.FILE
     scores = crossval_store.load_scores(path, key)

@@ -244,6 +244,11 @@ def screen_log_ratio(
     return -0.5 * (SCREEN_DOF + mean.size) * (math.log1p(qa) - math.log1p(qb))
 
 
+def screened_share(js: JointState, n_draws: int, thin: int, joint_after_burn: int) -> float:
+    """Share of the joint proposals after burn-in the screen turned down unseen."""
+    return js.screened / (n_draws * thin * max(1, joint_after_burn))
+
+
 def propose(z_joint: FloatArray, chol: FloatArray, eps: FloatArray) -> FloatArray:
     """``z_J + L e`` (one chain)."""
     out: FloatArray = z_joint + chol @ eps
@@ -288,4 +293,5 @@ __all__ = [
     "screen_in_use",
     "screen_log_ratio",
     "screen_precision",
+    "screened_share",
 ]

@@ -379,8 +379,7 @@ def _results(
                 thin=sampler.thin,
                 proposal_cov=joint_covariance(s.joint[k] if s.joint else None, joint, d),
                 screened=(
-                    s.joint[k].screened
-                    / (n_draws * sampler.thin * max(1, sampler.joint_after_burn))
+                    jm.screened_share(s.joint[k], n_draws, sampler.thin, sampler.joint_after_burn)
                     if sampler.screen and s.joint
                     else None
                 ),

@@ -248,8 +248,7 @@ class MetropolisWithinGibbs:
             acceptance[joint] = state.joint.accepted / (n_draws * self.thin * self.joint_after_burn)
         screened = None
         if self.screen and state.joint is not None:
-            moves = n_draws * self.thin * max(1, self.joint_after_burn)
-            screened = state.joint.screened / moves
+            screened = jm.screened_share(state.joint, n_draws, self.thin, self.joint_after_burn)
         scales = np.zeros(x.size)
         scales[active] = np.asarray(state.scale)[active]
         return SamplerResult(
