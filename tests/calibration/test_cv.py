@@ -221,12 +221,22 @@ def test_psis_matches_an_exact_refit(small_wall: Wall, wall_posterior: Posterior
     for level in (0.95, 0.5):
         se = np.sqrt(level * (1.0 - level) / n)
         assert abs(scores.band_coverage(level) - level) < 3.5 * se, (level, scores.pit)
+        shares = scores.band_shares(level)
+        assert shares.shape == (a.n_periods,)
+        assert shares.mean() == pytest.approx(scores.band_coverage(level))
+        # the SE with the period as the unit, and the check it makes
+        assert scores.band_coverage_se(level) == pytest.approx(
+            shares.std(ddof=1) / np.sqrt(a.n_periods)
+        )
+        assert scores.band_check(level, z=3.5) == "holds"
     # ... and show it when they do not: the same draws with a noise SD five times too small
     aux = np.array(wall_posterior.aux, dtype=float, copy=True)
     aux[..., wall_posterior.aux_names.index("lambda_star")] *= 25.0
     narrow = dataclasses.replace(wall_posterior, aux=aux)
     overconfident = cv.leave_period_out(em, a.observations, narrow, draws_per_chain=100)
     assert overconfident.band_coverage(0.95) < 0.95 - 3.5 * np.sqrt(0.95 * 0.05 / n)
+    assert overconfident.band_check(0.95) == "too narrow"
+    assert overconfident.band_check(0.5) == "too narrow"
     best = int(np.argmin(scores.pareto_k))
     assert scores.pareto_k[best] < cv.PARETO_K_MAX
     value, refit, pit = cv.refit_period(
@@ -279,3 +289,33 @@ def test_paired_difference_is_arviz_compare() -> None:
     assert table.index[0] == "a"
     assert diff == pytest.approx(table.loc["b", "elpd_diff"], rel=1e-10)
     assert se == pytest.approx(table.loc["b", "dse"], rel=1e-10)
+
+
+def test_band_check_takes_the_period_as_the_unit() -> None:
+    # 20 periods of 48 samples whose PITs fall inside or outside together: a binomial SE
+    # of 960 independent samples would call a 0.90 coverage far off 0.95; over the
+    # periods it is within two SEs ...
+    rng = np.random.default_rng(0)
+    inside = rng.random(20) < 0.9
+    pit = np.where(inside, 0.5, 0.999)[None, :] * np.ones((48, 1))
+    scores = cv.PeriodScores(
+        psis=np.zeros(20), pareto_k=np.zeros(20), lppd=np.zeros(20),
+        refit=np.full(20, np.nan), log_jacobian=0.0, draws=10, pit=pit,
+    )  # fmt: skip
+    cov = scores.band_coverage(0.95)
+    assert cov == pytest.approx(inside.mean())
+    assert abs(cov - 0.95) > 3.0 * np.sqrt(0.95 * 0.05 / pit.size)
+    se = scores.band_coverage_se(0.95)
+    assert se == pytest.approx(np.std(inside.astype(float), ddof=1) / np.sqrt(20))
+    assert abs(cov - 0.95) < 2.0 * se
+    assert scores.band_check(0.95) == "holds"
+    # ... while every sample in the middle makes both bands too wide, and none too narrow
+    wide = dataclasses.replace(scores, pit=np.full((48, 20), 0.5) + 0.01 * rng.random((48, 20)))
+    assert wide.band_check(0.95) == wide.band_check(0.5) == "too wide"
+    narrow = dataclasses.replace(scores, pit=np.full((48, 20), 0.999))
+    assert narrow.band_coverage_se(0.5) == 0.0
+    assert narrow.band_check(0.5) == "too narrow"
+    assert cv.PeriodScores(
+        psis=np.zeros(2), pareto_k=np.zeros(2), lppd=np.zeros(2),
+        refit=np.full(2, np.nan), log_jacobian=0.0, draws=10,
+    ).band_check(0.95) == ""  # fmt: skip

@@ -55,12 +55,21 @@ def test_ar1_errors_win_on_ar1_noise(ranked: tuple[Result, Path]) -> None:
         row = table.set_index("variant").loc[name]
         assert group["elpd_i"].sum() == pytest.approx(row["elpd"])
         assert int((group["method"] == "refit").sum()) == row["refits"]
+        # the left-out bands: the mean of the periods' shares, its SE over the periods
+        for level in ("95", "50"):
+            shares = group[f"band{level}_i"].to_numpy()
+            assert np.all((shares >= 0.0) & (shares <= 1.0))
+            assert row[f"loo_band{level}"] == pytest.approx(shares.mean())
+            se = shares.std(ddof=1) / np.sqrt(shares.size)
+            assert row[f"loo_band{level}_se"] == pytest.approx(se)
+        assert row["loo_band95_worst"] == pytest.approx(group["band95_i"].min())
     assert (out / "compare.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     summary = (out / "compare.md").read_text(encoding="utf-8")
     assert "| 1 | ar1 |" in summary
     assert "The test window is read by none of it" in summary
     text = result.output
     assert "ar1: best" in text
+    assert f"{best['loo_band95']:.3f}±{best['loo_band95_se']:.3f}" in text
     assert "white: worse by" in text
     assert f"wrote {out / 'compare.csv'}" in text
 

@@ -69,6 +69,8 @@ from bayescal.mcmc.chains import ChainBackend
 from bayescal.mcmc.diagnostics import import_arviz
 
 __all__ = [
+    "BAND_CHECK_Z",
+    "CONFIDENTLY_WRONG",
     "PARETO_K_MAX",
     "PeriodScores",
     "held_out_target",
@@ -82,6 +84,13 @@ __all__ = [
 
 FloatArray = NDArray[np.float64]
 Tick = Callable[[int], None]
+
+#: A left-out band "misses its rate" when its coverage is more than this many
+#: standard errors (the period as the unit) from the band's level.
+BAND_CHECK_Z = 2.0
+#: A left-out period whose 95 % band holds less than this share of its samples is
+#: predicted confidently wrong.
+CONFIDENTLY_WRONG = 0.5
 
 
 def log_jacobian(sd: ArrayLike) -> float:
@@ -312,6 +321,42 @@ class PeriodScores:
         if not self.pit.size:
             return math.nan
         return float(np.mean(np.abs(self.pit - 0.5) < 0.5 * level))
+
+    def band_shares(self, level: float) -> FloatArray:
+        """Share of each training period's samples inside the central ``level`` band of
+        its leave-one-out prediction ``(m*,)`` (empty without PIT values); their mean is
+        :meth:`band_coverage`."""
+        if not self.pit.size:
+            return np.zeros(0)
+        out: FloatArray = np.mean(np.abs(self.pit - 0.5) < 0.5 * level, axis=0)
+        return out
+
+    def band_coverage_se(self, level: float) -> float:
+        """Standard error of :meth:`band_coverage` with the period as the unit,
+        ``sqrt(var(share_i) / m*)`` (NaN without PIT values or with one period).
+
+        The samples of a period fall inside or outside together (their errors are
+        correlated in time), so the binomial SE of independent samples,
+        ``sqrt(level (1 - level) / n)``, would be too small; the periods are the
+        exchangeable units, as for the ELPD's :attr:`se`."""
+        shares = self.band_shares(level)
+        if shares.size < 2:
+            return math.nan
+        return math.sqrt(float(np.var(shares, ddof=1)) / shares.size)
+
+    def band_check(self, level: float, *, z: float = BAND_CHECK_Z) -> str:
+        """``"holds"``, ``"too wide"`` or ``"too narrow"``: whether the left-out band's
+        coverage lies within ``z`` standard errors (:meth:`band_coverage_se`) of
+        ``level`` (``""`` without PIT values)."""
+        coverage, se = self.band_coverage(level), self.band_coverage_se(level)
+        if not math.isfinite(coverage):
+            return ""
+        margin = z * se if math.isfinite(se) else 0.0
+        if coverage > level + margin:
+            return "too wide"
+        if coverage < level - margin:
+            return "too narrow"
+        return "holds"
 
 
 def _relative_efficiency(posterior: Posterior) -> float:

@@ -386,9 +386,11 @@ def compare(
     Pareto k exceeds 0.7). The variants are ranked by the sum, the ELPD, with
     the difference to the best and its standard error. Beside them, the share
     of the training samples inside the 95 % and 50 % bands of their period
-    left out: how the bands of a new period hold, before the test window is
-    read. Only the training periods are read: the test window is left for the
-    final metrics of the variant chosen.
+    left out, with its standard error over the periods: how the bands of a new
+    period hold, before the test window is read. The ELPD ranks; the bands
+    check, and a note says where one misses its rate by more than two SE or a
+    period is predicted confidently wrong. Only the training periods are read:
+    the test window is left for the final metrics of the variant chosen.
 
     Writes compare.csv (the ranking), compare-periods.csv (every period of
     every variant), compare.png and compare.md into --output; each study keeps

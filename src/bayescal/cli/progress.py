@@ -280,6 +280,15 @@ def simulation_bar(total: int, desc: str = "simulations") -> tuple[Progress, Cal
     return progress, bar.close
 
 
+def _band(row: Any, column: str) -> str:
+    """``0.970±0.007``: a left-out band's coverage and its SE (blank where absent)."""
+    value = float(row.get(column, float("nan")))
+    se = float(row.get(f"{column}_se", float("nan")))
+    if value != value:
+        return "–"
+    return f"{value:.3f}±{se:.3f}" if se == se else f"{value:.3f}"
+
+
 def comparison_text(table: Any, notes: Sequence[str], files: Mapping[str, Any]) -> str:
     """The ranking of ``bayescal compare``: table, verdicts, notes and the files written."""
     from bayescal.report.compare import SMALL_DIFFERENCE, verdict
@@ -287,7 +296,7 @@ def comparison_text(table: Any, notes: Sequence[str], files: Mapping[str, Any]) 
     width = max(20, 1 + max(len(str(v)) for v in table["variant"]))
     head = (
         f"{'rank':>4}  {'variant':<{width}}{'ELPD':>11}{'SE':>8}{'diff':>10}{'SE diff':>9}"
-        f"{'p_loo':>8}{'k>0.7':>7}{'refits':>7}{'band95':>8}{'band50':>8}"
+        f"{'p_loo':>8}{'k>0.7':>7}{'refits':>7}{'band95':>14}{'band50':>14}"
     )
     lines = [
         f"leave-one-period-out ELPD over {int(table['periods'].iloc[0])} training periods "
@@ -299,7 +308,7 @@ def comparison_text(table: Any, notes: Sequence[str], files: Mapping[str, Any]) 
             f"{int(r['rank']):>4}  {r['variant']!s:<{width}}{r['elpd']:>11.1f}{r['se']:>8.1f}"
             f"{r['elpd_diff']:>10.1f}{r['se_diff']:>9.1f}{r['p_loo']:>8.1f}"
             f"{int(r['k_high']):>7}{int(r['refits']):>7}"
-            f"{r.get('loo_band95', float('nan')):>8.3f}{r.get('loo_band50', float('nan')):>8.3f}"
+            f"{_band(r, 'loo_band95'):>14}{_band(r, 'loo_band50'):>14}"
         )
     lines.append("")
     lines += [
@@ -308,7 +317,8 @@ def comparison_text(table: Any, notes: Sequence[str], files: Mapping[str, Any]) 
     lines.append(
         f"(a difference counts when it exceeds {SMALL_DIFFERENCE:g} nats and twice its SE; "
         "band95/band50: share of the training samples inside the 95 %/50 % band of their "
-        "period left out; the test window was not read)"
+        "period left out, ± its SE over the periods; the ranking is by ELPD, the bands are "
+        "a check; the test window was not read)"
     )
     lines += [f"note: {n}" for n in notes]
     lines += [f"wrote {path}" for path in files.values()]

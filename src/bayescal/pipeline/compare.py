@@ -17,7 +17,10 @@ discrepancy on or off, another standardisation). :func:`compare`
    ``max_refits`` per variant; the scores are kept in each study's output
    folder (:mod:`bayescal.store.crossval`) and reused by a later comparison;
 4. ranks the variants by ELPD, with the difference to the best and its
-   standard error from the paired periods, and writes into ``output``:
+   standard error from the paired periods, beside the left-out bands with
+   their standard errors (the period as the unit), notes where a band misses
+   its rate by more than two of them or a period is predicted confidently
+   wrong, and writes into ``output``:
    ``compare.csv`` (the ranking), ``compare-periods.csv`` (every period of
    every variant), ``compare.png`` (:func:`bayescal.report.compare.plot_comparison`)
    and ``compare.md`` (a summary page).
@@ -28,6 +31,7 @@ the final metrics of the variant chosen.
 
 from __future__ import annotations
 
+import math
 from collections import Counter
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -39,6 +43,7 @@ import pandas as pd
 
 from bayescal.atomic import atomic_write_text
 from bayescal.calibration.cv import (
+    CONFIDENTLY_WRONG,
     PeriodScores,
     leave_period_out,
     paired_difference,
@@ -324,7 +329,10 @@ def _tables(variants: Sequence[Variant], times: list[str]) -> tuple[pd.DataFrame
                 "refits": int(np.sum(s.refitted)),
                 "psis_only": int(np.sum(s.psis_only)),
                 "loo_band95": s.band_coverage(0.95),
+                "loo_band95_se": s.band_coverage_se(0.95),
                 "loo_band50": s.band_coverage(0.50),
+                "loo_band50_se": s.band_coverage_se(0.50),
+                "loo_band95_worst": _worst(s.band_shares(0.95)),
                 **v.settings,
                 "study": str(v.study.path),
             }
@@ -340,6 +348,8 @@ def _tables(variants: Sequence[Variant], times: list[str]) -> tuple[pd.DataFrame
             "pareto_k": float(v.scores.pareto_k[i]),
             "lppd_i": float(v.scores.lppd[i]),
             "method": "refit" if v.scores.refitted[i] else "psis",
+            "band95_i": _share(v.scores, 0.95, i),
+            "band50_i": _share(v.scores, 0.50, i),
         }
         for v in ranked
         for i in range(v.scores.n_periods)
@@ -347,10 +357,49 @@ def _tables(variants: Sequence[Variant], times: list[str]) -> tuple[pd.DataFrame
     return pd.DataFrame(rows), pd.DataFrame(period_rows)
 
 
+def _share(scores: PeriodScores, level: float, period: int) -> float:
+    shares = scores.band_shares(level)
+    return float(shares[period]) if shares.size else math.nan
+
+
+def _worst(shares: np.ndarray) -> float:
+    return float(np.min(shares)) if shares.size else math.nan
+
+
+def _band_notes(label: str, s: PeriodScores) -> list[str]:
+    """What the left-out bands say beside the ELPD: a band off its rate by more than
+    BAND_CHECK_Z standard errors, and the periods predicted confidently wrong."""
+    notes = []
+    for level in (0.95, 0.5):
+        check = s.band_check(level)
+        if check in ("too wide", "too narrow"):
+            cov, se = s.band_coverage(level), s.band_coverage_se(level)
+            what = (
+                "wider than its rate: the bands of new periods would be conservative"
+                if check == "too wide"
+                else "narrower than its rate: the bands of new periods would be overconfident"
+            )
+            off = f"{abs(cov - level) / se:.1f} SE" if se > 1e-12 else "the same in every period"
+            notes.append(
+                f"{label}: left-out {level * 100:g} % band {cov:.3f} ± {se:.3f}, {what} "
+                f"({off} from {level:g})"
+            )
+    shares = s.band_shares(0.95)
+    wrong = np.flatnonzero(shares < CONFIDENTLY_WRONG)
+    if wrong.size:
+        cases = ", ".join(f"{i} ({shares[i]:.0%})" for i in wrong)
+        notes.append(
+            f"{label}: the left-out 95 % band held less than half of the samples of "
+            f"period(s) {cases}: confidently wrong there"
+        )
+    return notes
+
+
 def _notes(variants: Sequence[Variant], max_refits: int) -> list[str]:
     notes = []
     for v in variants:
         s = v.scores
+        notes += _band_notes(v.label, s)
         shaky = np.flatnonzero(s.psis_only)
         if s.refitted.any():
             done = ", ".join(str(i) for i in np.flatnonzero(s.refitted))

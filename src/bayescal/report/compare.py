@@ -137,9 +137,12 @@ def _plot_periods(ax: Axes, periods: pd.DataFrame, order: list[str]) -> None:
         ax.legend(fontsize=8)
 
 
-def _cell(value: object, column: str = "") -> str:
+def _cell(value: object, column: str = "", row: pd.Series | None = None) -> str:
     if isinstance(value, float | np.floating):
-        return f"{float(value):.3f}" if column.startswith("loo_band") else f"{float(value):.1f}"
+        if not column.startswith("loo_band"):
+            return f"{float(value):.1f}"
+        se = float(row.get(f"{column}_se", np.nan)) if row is not None else np.nan
+        return f"{float(value):.3f} ± {se:.3f}" if np.isfinite(se) else f"{float(value):.3f}"
     return str(value).replace("|", "\\|")
 
 
@@ -159,6 +162,7 @@ def comparison_markdown(
         "refits": "refits",
         "loo_band95": "left-out 95 % band",
         "loo_band50": "left-out 50 % band",
+        "loo_band95_worst": "worst period, 95 % band",
         "parameters": "parameters",
         "priors": "priors",
         "error_model": "error model",
@@ -177,7 +181,7 @@ def comparison_markdown(
         "|" + "|".join("---" for _ in shown) + "|",
     ]
     for _, row in table.iterrows():
-        lines.append("| " + " | ".join(_cell(row[c], c) for c in shown) + " |")
+        lines.append("| " + " | ".join(_cell(row[c], c, row) for c in shown) + " |")
     lines += ["", "## Reading it", ""]
     for _, row in table.iterrows():
         lines.append(f"- **{row['variant']}**: {verdict(row['elpd_diff'], row['se_diff'])}")
@@ -191,8 +195,11 @@ def comparison_markdown(
         "(the emulator route's band: parameters, emulator, noise and the discrepancy, "
         "weighted by PSIS or from the refit): what the bands of a new period should hold, "
         "measured before the test window is read. Neighbouring samples fall inside or "
-        "outside together, so read them with the few periods' worth of independent "
-        "information they hold.",
+        "outside together, so their standard error (±) takes the period as the unit. The "
+        "ranking is by ELPD; the bands are a check of the variant chosen: a band more "
+        "than two SE above its rate is conservative, one below it overconfident, and a "
+        "period whose 95 % band holds less than half of its samples is predicted "
+        "confidently wrong (see the notes).",
         "",
         TEST_WINDOW_TEXT,
     ]
