@@ -85,9 +85,11 @@ def test_example_is_listed_ships_no_data_and_uses_the_catalogue() -> None:
         assert p.prior.lower < value < p.prior.upper, target
     assert study.periods.test_fraction == 0.2
     assert study.predict.method == "simulator"
-    # The temperature inside the wall is a held-out sensor, the flux has AR(1) errors.
+    # The temperature inside the wall is a held-out sensor; the flux has AR(1) errors
+    # and a discrepancy over the days' conditions (both chosen by bayescal compare).
     assert study.outputs.held_out == ["temp_interface_2"]
     assert study.outputs.errors["heat_flux_in"].model == "ar1"
+    assert study.outputs.errors["heat_flux_in"].discrepancy in (True, "conditions")
 
 
 def _study_folder(tmp_path: Path) -> Path:
@@ -130,7 +132,7 @@ def _column(table: pd.DataFrame, name: str) -> dict[str, float]:
 @pytest.mark.shared_data
 def test_calibration_beats_the_catalogue_wall_on_both_windows(results: Results) -> None:
     # The nominal wall reaches about 0.45 W/m² on the training days (0.28 on the
-    # held-out week); the full-size run gains 14 % and 25 % (docs/case-studies.md).
+    # held-out week); the full-size run gains 59 % and 6 % (docs/case-studies.md).
     for window in ("train", "test"):
         nominal = _metric(results, "nominal", window)
         assert _metric(results, "calibrated", window) < 0.95 * nominal, window
@@ -161,8 +163,9 @@ def test_posterior_is_inside_the_prior(results: Results) -> None:
         mean, width = means[name], p.prior.upper - p.prior.lower
         # Away from the bounds: the data, not the prior, locate every parameter.
         assert p.prior.lower + 0.1 * width < mean < p.prior.upper - 0.1 * width, name
-    # The AR(1) coefficient of the flux's errors: strongly positive (0.77 at full size).
-    assert 0.5 < means["phi"] < 0.95
+    # The AR(1) coefficient of the flux's errors: clearly positive (0.38 at full size,
+    # where the discrepancy takes the day-to-day misfit; 0.77 without it).
+    assert 0.2 < means["phi"] < 0.95
 
 
 @pytest.mark.slow
