@@ -6,6 +6,9 @@ Definitions (``e = simulated - measured``, over the ``n`` scored samples):
 * mean absolute error = mean(|e|);
 * maximum absolute error = max(|e|) (the paper's "MAE" column is this one);
 * bias = mean(e);
+* excess kurtosis = mean((e - bias)⁴) / var(e)² - 3 (0 for Gaussian errors; large
+  when a few errors dominate the spread: a Gaussian band matched to their variance
+  is then too wide in its middle and its 50 % band holds more than half of them);
 * ASHRAE Guideline 14 CV(RMSE) = sqrt(sum(e²) / (n - p)) / mean(measured) and
   NMBE = sum(-e) / ((n - p) · mean(measured)), both in %, with ``p`` the number of
   parameters of the model (degrees of freedom; Guideline 14 uses p = 1 for
@@ -18,7 +21,13 @@ The prediction stage adds ``coverage95`` and ``coverage50`` (shares of measured
 samples inside the 95 % and 50 % bands of the predictive distribution; honest
 bands give about 0.95 and 0.50), ``pit_ks`` (the largest distance between the
 empirical distribution of the PIT values and the uniform one: small when the
-predictive distribution is right) and ``guideline14`` (:func:`meets_guideline14`).
+predictive distribution is right), ``band_scale`` (the outer band's spread over the
+errors' RMS: the band's half-width divided by the normal quantile of its level,
+median over the samples, over the RMSE; about 1 when the band's width matches the
+errors, above 1 when it is wider than the errors it should hold) and
+``guideline14`` (:func:`meets_guideline14`). :func:`band_notes` turns these
+into sentences where a band's width or the errors' shape explains a coverage
+off its rate.
 
 Guideline 14 by resolution
 --------------------------
@@ -48,6 +57,7 @@ from typing import Final, Literal
 
 import numpy as np
 import numpy.typing as npt
+import pandas as pd
 
 __all__ = [
     "G14_CV_RMSE",
@@ -59,6 +69,7 @@ __all__ = [
     "MODELS",
     "MetricColumn",
     "Metrics",
+    "band_notes",
     "fit_metrics",
     "meets_guideline14",
     "metric_columns",
@@ -73,6 +84,12 @@ G14_NMBE: Final = 10.0
 #: and |NMBE| <= 5 %.
 G14_MONTHLY_CV_RMSE: Final = 15.0
 G14_MONTHLY_NMBE: Final = 5.0
+#: :func:`band_notes`: a band whose spread is outside ``[1 / BAND_SCALE_OFF,
+#: BAND_SCALE_OFF]`` times the errors' RMS is called wider / narrower than the errors.
+BAND_SCALE_OFF: Final = 1.25
+#: :func:`band_notes`: errors with a larger excess kurtosis are called heavy-tailed
+#: (Gaussian errors: 0, with a standard error of about sqrt(24 / n) for independent ones).
+HEAVY_TAILS: Final = 2.0
 
 
 @dataclass(frozen=True)
@@ -87,6 +104,7 @@ class Metrics:
     bias: float
     cv_rmse: float
     nmbe: float
+    excess_kurtosis: float = float("nan")
 
     def as_dict(self) -> dict[str, float]:
         """The metrics as a plain dictionary."""
@@ -119,6 +137,9 @@ def fit_metrics(simulated: npt.ArrayLike, measured: npt.ArrayLike, *, p: int = 1
     with np.errstate(divide="ignore", invalid="ignore"):
         cv = 100.0 * np.sqrt(np.sum(e**2) / dof) / abs(mean_obs) if mean_obs != 0 else float("nan")
         nmbe = 100.0 * float(np.sum(-e)) / (dof * mean_obs) if mean_obs != 0 else float("nan")
+    centred = e - np.mean(e)
+    m2 = float(np.mean(centred**2))
+    kurtosis = float(np.mean(centred**4)) / m2**2 - 3.0 if n >= 4 and m2 > 0 else float("nan")
     return Metrics(
         n=n,
         mse=mse,
@@ -128,6 +149,7 @@ def fit_metrics(simulated: npt.ArrayLike, measured: npt.ArrayLike, *, p: int = 1
         bias=float(np.mean(e)),
         cv_rmse=float(cv),
         nmbe=float(nmbe),
+        excess_kurtosis=kurtosis,
     )
 
 
@@ -302,6 +324,24 @@ METRIC_COLUMNS: Final = (
         digits=3,
     ),
     MetricColumn(
+        "band_scale",
+        "bandSD/e",
+        "band spread / RMSE",
+        "1",
+        "the outer band's half-width over the normal quantile of its level (median over "
+        "the samples), divided by the RMSE: about 1 when the band is as wide as the errors",
+        digits=3,
+    ),
+    MetricColumn(
+        "excess_kurtosis",
+        "kurt",
+        "excess kurtosis of the errors",
+        "1",
+        "excess kurtosis of the errors (0 for Gaussian ones; large when a few errors "
+        "dominate their spread)",
+        digits=3,
+    ),
+    MetricColumn(
         "guideline14",
         "G14",
         "meets Guideline 14",
@@ -345,7 +385,7 @@ KEY_COLUMNS: Final = ("output", "model", "window")
 MODELS: Final = ("nominal", "calibrated", "calibrated+delta")
 
 _ERRORS = ("mse", "rmse", "mean_abs_error", "max_abs_error")
-_BANDS = ("coverage95", "coverage50", "pit_ks", "guideline14")
+_BANDS = ("coverage95", "coverage50", "pit_ks", "band_scale", "excess_kurtosis", "guideline14")
 _MONTHLY = ("cv_rmse_monthly", "nmbe_monthly", "guideline14_monthly")
 _TABLES: dict[str, tuple[str, ...]] = {
     "csv": tuple(c.name for c in METRIC_COLUMNS),
@@ -377,3 +417,50 @@ def metric_columns(table: Table = "csv") -> tuple[MetricColumn, ...]:
     """
     by_name = {c.name: c for c in METRIC_COLUMNS}
     return tuple(by_name[name] for name in _TABLES[table])
+
+
+def band_notes(metrics: pd.DataFrame, *, level: float = 0.95) -> list[str]:
+    """Sentences saying why a calibrated band's coverage is off its rate, where the
+    metrics show it.
+
+    For every row of ``metrics`` (a ``metrics.csv`` table) with bands: a band
+    whose spread is more than :data:`BAND_SCALE_OFF` times the errors' RMS (or
+    less than its reciprocal) is wider (narrower) than the errors it should
+    hold; errors with an excess kurtosis above :data:`HEAVY_TAILS` are
+    heavy-tailed, and where the 50 % band then holds more than 55 % of them,
+    a few large errors set the Gaussian band's spread while most errors are
+    smaller. The thresholds describe; they are not tests (the samples of a
+    series are correlated).
+
+    Parameters
+    ----------
+    metrics
+        A table with the columns of ``metrics.csv``.
+    level
+        Probability of the outer band. [-]
+    """
+    if "band_scale" not in metrics.columns:  # older runs
+        return []
+    notes = []
+    outer = f"{100 * level:g} %"
+    for _, row in metrics.iterrows():
+        scale = float(row["band_scale"])
+        if not np.isfinite(scale):
+            continue
+        where = f"{row['output']}, {row['model']}, {row['window']}"
+        cover = f"covers {float(row['coverage95']):.3f} / {float(row['coverage50']):.3f}"
+        if scale > BAND_SCALE_OFF or scale < 1.0 / BAND_SCALE_OFF:
+            side = "wider" if scale > 1.0 else "narrower"
+            notes.append(
+                f"{where}: the {outer} band's spread is {scale:.2f} times the errors' RMS, "
+                f"{side} than the errors it should hold ({cover} at {outer} / 50 %)."
+            )
+        kurtosis = float(row.get("excess_kurtosis", float("nan")))
+        if kurtosis > HEAVY_TAILS and float(row["coverage50"]) > 0.55:
+            notes.append(
+                f"{where}: the errors are heavy-tailed (excess kurtosis {kurtosis:.3g}): a "
+                "few large errors set the spread of the Gaussian band, and its middle half "
+                f"holds {float(row['coverage50']):.3f} of them; an error model with heavier "
+                "tails, or the cause of the large errors, is what would narrow it."
+            )
+    return notes

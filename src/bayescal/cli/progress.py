@@ -18,7 +18,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from bayescal.metrics import KEY_COLUMNS, Metrics, metric_columns
+from bayescal.metrics import KEY_COLUMNS, Metrics, band_notes, metric_columns
 from bayescal.runner import Progress
 
 if TYPE_CHECKING:
@@ -205,6 +205,8 @@ def describe(res: Results) -> str:
         ]
         cols = [c for c in cols if c in m.columns]  # older runs lack newer columns
         lines.append(m[cols].to_string(index=False, float_format="{:.4g}".format))
+        level = float(res.predictions.dataset.attrs.get("level", 0.95))
+        lines += [f"  note: {n}" for n in band_notes(m, level=level)]
         lines.append(TEST_WINDOW_NOTE)
     if res.simulations is not None and res.simulations.failures:
         lines += ["", f"{len(res.simulations.failures)} failed run(s):"]

@@ -35,7 +35,7 @@ from bayescal.design import Design
 from bayescal.emulator.gp import Emulator, LooResult
 from bayescal.emulator.noise import RELATIVE_UNIT
 from bayescal.glossary import GLOSSARY
-from bayescal.metrics import MODELS, MetricColumn, metric_columns
+from bayescal.metrics import MODELS, MetricColumn, band_notes, metric_columns
 from bayescal.report import figures as fg
 from bayescal.report.uncertainty import uncertainty_figures, uncertainty_section
 from bayescal.runner import RunFailure
@@ -537,6 +537,10 @@ def _metrics(inputs: ReportInputs) -> str:
     held = _held_out(inputs.predictions)
     blocks = [_metrics_block(m, o, w, o in held) for o in outputs for w in ("train", "test")]
     text = "".join(b for b in blocks if b)
+    level = float(inputs.predictions.attrs.get("level", 0.95))
+    notes = "".join(f"<li>{_e(n)}</li>" for n in band_notes(m, level=level))
+    if notes:
+        text += f"<p>Why a band's coverage is off its rate:</p><ul>{notes}</ul>"
     return METRIC_NOTE + (text or "<p>No metrics were computed.</p>")
 
 
