@@ -99,8 +99,11 @@ def heater(rng: np.random.Generator, n: int) -> np.ndarray:
     return out
 
 
-def truth(mode: str, frame: pd.DataFrame, site: dict[str, float]) -> np.ndarray:
-    """EnergyPlus's output at the true parameters on ``frame``'s clock."""
+def truth(
+    mode: str, frame: pd.DataFrame, site: dict[str, float], values: dict[str, float] | None = None
+) -> np.ndarray:
+    """EnergyPlus's output at the true parameters (``values``, default ``TRUTH``) on
+    ``frame``'s clock."""
     from bayescal.simulators.base import Forcing
     from bayescal.simulators.energyplus_box import energyplus_test_box
 
@@ -119,11 +122,14 @@ def truth(mode: str, frame: pd.DataFrame, site: dict[str, float]) -> np.ndarray:
         timesteps_per_hour=12,
     )
     output = "heating_power" if mode == "coheating" else "temp_air_in"
-    return sim.simulate(TRUTH, forcing)[output]
+    return sim.simulate(TRUTH if values is None else values, forcing)[output]
 
 
-def make_phase(mode: str, rng: np.random.Generator) -> pd.DataFrame:
-    """The measured table of one phase (local standard time)."""
+def make_phase(
+    mode: str, rng: np.random.Generator, values: dict[str, float] | None = None
+) -> pd.DataFrame:
+    """The measured table of one phase (local standard time) at the true parameters
+    ``values`` (default ``TRUTH``)."""
     from bayescal.simulators.epw import read_epw_site
 
     epw = read_epw_site(_epw_path())
@@ -140,7 +146,7 @@ def make_phase(mode: str, rng: np.random.Generator) -> pd.DataFrame:
     elif HEATER > 0.0:
         frame["heat_input"] = heater(rng, n)
     output = "heating_power" if mode == "coheating" else "temp_air_in"
-    value = truth(mode, frame, site)
+    value = truth(mode, frame, site, values)
     noisy = value + rng.normal(0.0, NOISE_SD[output], n)
     table = frame.rename(columns=WEATHER)
     if mode == "coheating":

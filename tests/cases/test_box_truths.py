@@ -1,0 +1,29 @@
+"""The truths of ``scripts/box_truths.py``: inside the priors' middle, one per stratum."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "scripts"))
+
+import box_truths
+
+
+def test_truths_are_a_latin_hypercube_over_the_middle_of_the_priors() -> None:
+    drawn = box_truths.truths(10)
+    assert drawn == box_truths.truths(10)  # seeded
+    for name, (lo, hi) in box_truths.PRIORS.items():
+        unit = (np.array([t[name] for t in drawn]) - lo) / (hi - lo)
+        inner = (unit - 0.1) / 0.8  # the middle 80 % mapped to [0, 1]
+        assert np.all((inner > 0.0) & (inner < 1.0))
+        # one truth in each tenth of the middle: a Latin hypercube
+        assert sorted(np.floor(inner * 10).astype(int)) == list(range(10))
+
+
+def test_binomial_floor_is_the_one_the_docs_quote() -> None:
+    # docs/case-studies.md: at least 7 of 10 and 25 of 30 for 95 % intervals
+    assert box_truths.binomial_floor(10) == 7
+    assert box_truths.binomial_floor(30) == 25
