@@ -16,7 +16,9 @@ the training and test windows.
 It prints a Markdown table per truth and, per parameter, the truths covered
 against the binomial bound (the smallest count that 95 % intervals reach with
 probability 0.99). ``--keep`` keeps the study folders; the table is also written
-to ``box_truths_<mode>.csv`` in ``--out``.
+to ``box_truths_<mode>.csv`` in ``--out``, after every truth: a run stopped and
+started again with the same ``--truths`` keeps the truths it finished
+(``--fresh`` redoes them).
 
 Run (each truth is about one minute on the idle 2-core machine)::
 
@@ -101,6 +103,23 @@ def one_truth(mode: str, index: int, values: dict[str, float], folder: Path) -> 
     return row
 
 
+def finished(csv: Path, drawn: list[dict[str, float]]) -> list[dict[str, object]]:
+    """The rows of an earlier run kept in ``csv``: its first truths, where they are the
+    truths drawn now (same count and seed), in order."""
+    if not csv.exists():
+        return []
+    rows: list[dict[str, object]] = []
+    for row in pd.read_csv(csv).to_dict("records"):
+        i = len(rows)
+        same = i < len(drawn) and all(
+            np.isclose(float(row[f"{k}_true"]), drawn[i][k], rtol=1e-12) for k in PRIORS
+        )
+        if int(row["truth"]) != i or not same:
+            break
+        rows.append({str(k): v for k, v in row.items()})
+    return rows
+
+
 def binomial_floor(n: int, rate: float = 0.95, alpha: float = 0.01) -> int:
     """The smallest count of ``n`` intervals at ``rate`` reached with probability ``1 - alpha``."""
     return int(binom.ppf(alpha, n, rate))
@@ -112,16 +131,25 @@ def main() -> None:
     parser.add_argument("--truths", type=int, default=10)
     parser.add_argument("--out", type=Path, default=Path("box_truths"))
     parser.add_argument("--keep", action="store_true", help="keep every truth's study folder")
+    parser.add_argument("--fresh", action="store_true", help="redo truths already in the CSV")
     args = parser.parse_args()
     args.out.mkdir(parents=True, exist_ok=True)
-    rows = []
-    for i, values in enumerate(truths(args.truths)):
+    csv = args.out / f"box_truths_{args.mode}.csv"
+    drawn = truths(args.truths)
+    rows = [] if args.fresh else finished(csv, drawn)
+    if rows:
+        print(f"{len(rows)} truth(s) already in {csv} kept (--fresh redoes them)")
+    for i, values in enumerate(drawn):
+        if i < len(rows):
+            continue
         folder = args.out / f"{args.mode}-{i}"
         rows.append(one_truth(args.mode, i, values, folder))
         print(f"truth {i}: " + ", ".join(f"{k}={v}" for k, v in rows[-1].items()), flush=True)
         if not args.keep:
             shutil.rmtree(folder, ignore_errors=True)
-        pd.DataFrame(rows).to_csv(args.out / f"box_truths_{args.mode}.csv", index=False)
+        partial = csv.with_suffix(".csv.part")
+        pd.DataFrame(rows).to_csv(partial, index=False)
+        partial.replace(csv)  # atomic: a killed run keeps the truths it finished
     table = pd.DataFrame(rows)
     n = len(table)
     floor = binomial_floor(n)

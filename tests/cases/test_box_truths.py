@@ -27,3 +27,17 @@ def test_binomial_floor_is_the_one_the_docs_quote() -> None:
     # docs/case-studies.md: at least 7 of 10 and 25 of 30 for 95 % intervals
     assert box_truths.binomial_floor(10) == 7
     assert box_truths.binomial_floor(30) == 25
+
+
+def test_a_stopped_run_keeps_the_truths_it_finished(tmp_path: Path) -> None:
+    import pandas as pd
+
+    drawn = box_truths.truths(10)
+    rows = [{"truth": i} | {f"{k}_true": drawn[i][k] for k in box_truths.PRIORS} for i in range(3)]
+    csv = tmp_path / "box_truths_freefloat.csv"
+    pd.DataFrame(rows).to_csv(csv, index=False)
+    kept = box_truths.finished(csv, drawn)
+    assert [r["truth"] for r in kept] == [0, 1, 2]
+    # other truths (another count, hence another hypercube) are not kept
+    assert box_truths.finished(csv, box_truths.truths(5)) == []
+    assert box_truths.finished(tmp_path / "none.csv", drawn) == []
