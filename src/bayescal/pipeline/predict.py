@@ -721,9 +721,10 @@ def _band_series(kind: str, band: Band, output: str) -> dict[str, np.ndarray]:
 
 
 def _band_scores(
-    ds: xr.Dataset, prefix: str, obs: np.ndarray, mask: np.ndarray
+    ds: xr.Dataset, prefix: str, obs: np.ndarray, mask: np.ndarray, rmse: float
 ) -> dict[str, float]:
-    """Coverage of the bands, the outer band's spread over the RMSE and the PIT's distance
+    """Coverage of the bands, the outer band's spread over ``rmse`` (the prediction's,
+    :func:`~bayescal.metrics.fit_metrics` on the same samples) and the PIT's distance
     from uniform on the masked samples."""
     ok = mask & np.isfinite(obs)
     out: dict[str, float] = {}
@@ -736,10 +737,9 @@ def _band_scores(
         if f"{prefix}_{lower}" in ds:
             lo, hi = ds[f"{prefix}_{lower}"].values[ok], ds[f"{prefix}_{upper}"].values[ok]
             out[name] = float(np.mean((obs[ok] >= lo) & (obs[ok] <= hi)))
-    if f"{prefix}_lower" in ds and prefix in ds:
+    if f"{prefix}_lower" in ds:
         level = float(ds.attrs.get("level", 0.95))
         half = 0.5 * (ds[f"{prefix}_upper"].values[ok] - ds[f"{prefix}_lower"].values[ok])
-        rmse = float(np.sqrt(np.mean((ds[prefix].values[ok] - obs[ok]) ** 2)))
         spread = float(np.median(half)) / float(norm.ppf(0.5 + 0.5 * level))
         out["band_scale"] = spread / rmse if rmse > 0 else float("nan")
     if f"{prefix}_pit" in ds:
@@ -779,7 +779,7 @@ def metrics_table(ds: xr.Dataset) -> pd.DataFrame:
                 m = fit_metrics(sim[mask], obs[mask]).as_dict()
                 m |= dict.fromkeys(("coverage95", "coverage50", "pit_ks", "band_scale"), np.nan)
                 if model != "nominal":
-                    m |= _band_scores(ds, f"{o}_{key}", obs, mask)
+                    m |= _band_scores(ds, f"{o}_{key}", obs, mask, m["rmse"])
                 m["guideline14"] = meets_guideline14(m["cv_rmse"], m["nmbe"])
                 times = ds["time"].values[mask]
                 m |= monthly_metrics(times, sim[mask], obs[mask], how=_monthly_how(o))
