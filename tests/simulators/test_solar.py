@@ -160,6 +160,25 @@ def test_view_factors():
     assert solar.view_factors(180.0) == pytest.approx((0.0, 1.0))
 
 
+@pytest.mark.parametrize("tilt", [0.0, 30.0, 90.0, 135.0, 180.0])
+def test_longwave_view_factors_split_the_sky_as_energyplus(tilt: float) -> None:
+    f_sky, f_ground = solar.view_factors(tilt)
+    sky, air = solar.longwave_view_factors(tilt)
+    assert sky + air == pytest.approx(1.0)
+    assert sky == pytest.approx(f_sky**1.5)  # beta F_sky with beta = sqrt(F_sky)
+    assert solar.longwave_view_factors(tilt, sky_air_split=False) == pytest.approx(
+        (f_sky, f_ground)
+    )
+
+
+def test_longwave_view_factors_of_a_wall_and_a_roof() -> None:
+    # EnergyPlus Engineering Reference: a vertical wall sees 0.5 sky, of which
+    # beta = sqrt(0.5) = 0.707 is at the sky temperature; a roof sees only sky.
+    assert solar.longwave_view_factors(90.0) == pytest.approx((0.35355339, 0.64644661))
+    assert solar.longwave_view_factors(0.0) == pytest.approx((1.0, 0.0))
+    assert solar.longwave_view_factors(180.0) == pytest.approx((0.0, 1.0))
+
+
 def test_sky_temperature_from_infrared_inverts_stefan_boltzmann():
     t = np.array([-20.0, 0.0, 15.0])
     ir = Stefan_Boltzmann * (t + zero_Celsius) ** 4

@@ -184,6 +184,14 @@ class BoxSimulator(SimulatorBase):
     sky_model: Literal["isotropic", "haydavies", "perez"] = field_doc(
         "Sky-diffuse transposition model.", "perez", default="haydavies"
     )
+    sky_air_split: bool = field_doc(
+        "Long-wave exchange of the faces: true divides each face's sky view as "
+        "EnergyPlus does (the part sqrt((1 + cos tilt)/2) at the sky temperature, the rest, "
+        "the sky near the horizon, at air temperature); false puts the whole sky view at "
+        "the sky temperature.",
+        False,
+        default=True,
+    )
 
     @field_validator("constants")
     @classmethod

@@ -36,8 +36,11 @@ Exterior surfaces
     Absorbed solar ``absorptivity · G_face`` (pvlib's transposition); convection
     ``h_c = h_out_a + h_out_b · v`` (ISO 6946 annex C: 4 + 4 v); long-wave
     exchange ``emissivity · sigma · F (T⁴ - T_s⁴)`` with the sky (view factor
-    ``(1 + cos tilt)/2``) and with the ground at air temperature
-    (``(1 - cos tilt)/2``). The exchange is written ``h_r (T - T_s)`` with the
+    ``F_sky = (1 + cos tilt)/2``) and with the ground at air temperature
+    (``(1 - cos tilt)/2``). By default (``sky_air_split``) the sky view is
+    divided as in EnergyPlus: ``beta = sqrt(F_sky)`` of it at the sky
+    temperature, the rest, the sky near the horizon, at air temperature (a wall
+    sees 0.354 sky, a roof 1). The exchange is written ``h_r (T - T_s)`` with the
     exact secant coefficient ``h_r = emissivity sigma F (T² + T_s²)(T + T_s)``
     evaluated with the surface temperature of the previous step (lagged one
     step): the step is then linear, and energy is conserved exactly by the
@@ -147,8 +150,10 @@ class Geometry:
     solar_share
         Fraction of the transmitted solar power absorbed at each face's inside
         surface, shape ``(6,)``. [-]
-    f_sky, f_ground
-        View factors to sky and ground, shape ``(7,)``. [-]
+    f_sky, f_air
+        Long-wave view factors at the sky temperature and at outside air
+        temperature (ground, and the sky near the horizon when the sky view is
+        split), shape ``(7,)`` (:func:`~bayescal.simulators.solar.longwave_view_factors`). [-]
     """
 
     tilt: np.ndarray
@@ -158,10 +163,12 @@ class Geometry:
     h_in: np.ndarray
     solar_share: np.ndarray
     f_sky: np.ndarray
-    f_ground: np.ndarray
+    f_air: np.ndarray
 
 
-def box_geometry(values: Mapping[str, float], window_azimuth: float) -> Geometry:
+def box_geometry(
+    values: Mapping[str, float], window_azimuth: float, sky_air_split: bool = True
+) -> Geometry:
     """Geometry of the box from its constants (see :data:`DEFAULTS`)."""
     side, glazed = values["side"], values["glazed_side"]
     offsets = np.array([0.0, 90.0, 180.0, 270.0, 0.0, 0.0, 0.0])
@@ -172,7 +179,7 @@ def box_geometry(values: Mapping[str, float], window_azimuth: float) -> Geometry
     area[0] -= glazed**2
     h_in = np.array([values["h_in_wall"]] * 4 + [values["h_in_ceiling"], values["h_in_floor"]])
     receiving = inner * (np.arange(6) != 0)
-    views = np.array([solar.view_factors(t) for t in tilt])
+    views = np.array([solar.longwave_view_factors(t, sky_air_split) for t in tilt])
     return Geometry(
         tilt=tilt,
         azimuth=azimuth,
@@ -181,7 +188,7 @@ def box_geometry(values: Mapping[str, float], window_azimuth: float) -> Geometry
         h_in=h_in,
         solar_share=receiving / receiving.sum(),
         f_sky=views[:, 0],
-        f_ground=views[:, 1],
+        f_air=views[:, 1],
     )
 
 
@@ -371,6 +378,11 @@ class TestBox:
     sky_model
         Sky-diffuse transposition model (``"isotropic"``, ``"haydavies"``,
         ``"perez"``).
+    sky_air_split
+        Divide each face's long-wave sky view between the sky temperature and
+        the air temperature as EnergyPlus does
+        (:func:`~bayescal.simulators.solar.longwave_view_factors`); ``False``
+        puts the whole sky view at the sky temperature.
     **constants
         Values overriding :data:`DEFAULTS` (units there).
     """
@@ -389,6 +401,7 @@ class TestBox:
         cells: int = 20,
         max_step: float = 600.0,
         sky_model: str = "haydavies",
+        sky_air_split: bool = True,
         **constants: float,
     ) -> None:
         if mode not in MODES:
@@ -413,6 +426,7 @@ class TestBox:
         self.cells = int(cells)
         self.max_step = float(max_step)
         self.sky_model = sky_model
+        self.sky_air_split = bool(sky_air_split)
         self.constants = {**DEFAULTS, **{k: float(v) for k, v in constants.items()}}
         self._parameters = tuple(parameters)
         _check_values(self.constants)
@@ -487,7 +501,7 @@ class TestBox:
         series = _refine(forcing, k, self.input_names + self.optional_input_names)
         offsets = (np.arange(series["ghi"].size) * dt * 1e9).astype("timedelta64[ns]")
         times = np.asarray(forcing.start, dtype="datetime64[ns]") + offsets
-        geo = box_geometry(values, self.window_azimuth)
+        geo = box_geometry(values, self.window_azimuth, self.sky_air_split)
         drivers = self._drivers(values, geo, series, times)
         system = assemble(values, geo, self.cells)
         return _march(values, geo, system, drivers, dt, self.mode)
@@ -582,9 +596,9 @@ class _Exterior:
 
 
 def _radiation_constants(values: Mapping[str, float], geo: Geometry) -> tuple[np.ndarray, ...]:
-    """``emissivity * F * sigma`` to the sky and to the ground, shape ``(7,)`` each."""
+    """``emissivity * F * sigma`` to the sky and to the air temperature, shape ``(7,)`` each."""
     eps = np.array([values["emissivity"]] * 6 + [values["emissivity_glass"]])
-    return eps * geo.f_sky * Stefan_Boltzmann, eps * geo.f_ground * Stefan_Boltzmann
+    return eps * geo.f_sky * Stefan_Boltzmann, eps * geo.f_air * Stefan_Boltzmann
 
 
 def _exterior(rad: tuple[np.ndarray, ...], d: Drivers, j: int, t_surf: np.ndarray) -> _Exterior:

@@ -326,6 +326,39 @@ def view_factors(surface_tilt: float) -> tuple[float, float]:
     return 0.5 * (1.0 + c), 0.5 * (1.0 - c)
 
 
+def longwave_view_factors(surface_tilt: float, sky_air_split: bool = True) -> tuple[float, float]:
+    """Long-wave view factors of a plane to the sky and to surroundings at air temperature.
+
+    The plane sees the sky through ``F_sky = (1 + cos tilt) / 2`` and the ground,
+    taken at outside air temperature, through ``F_ground = (1 - cos tilt) / 2``
+    (:func:`view_factors`). A sky temperature derived from the horizontal
+    long-wave irradiance is a hemispherical average, but the sky near the horizon,
+    which is most of what a wall sees, radiates nearly at air temperature. With
+    ``sky_air_split`` the sky view is divided as in EnergyPlus (Walton 1983,
+    Engineering Reference "Exterior long-wave radiation"): the part
+    ``beta = sqrt((1 + cos tilt) / 2)`` exchanges with the sky temperature and
+    ``1 - beta`` with the air. A roof keeps its whole sky (beta 1); a wall sees
+    0.354 sky instead of 0.5.
+
+    Parameters
+    ----------
+    surface_tilt
+        Tilt from horizontal: 0 faces up, 180 faces down. [°]
+    sky_air_split
+        Divide the sky view between sky and air temperature (``False``: the
+        whole sky view at the sky temperature).
+
+    Returns
+    -------
+    f_sky, f_air
+        View factor at the sky temperature and view factor at outside air
+        temperature (ground, plus the sky near the horizon); they sum to 1. [-]
+    """
+    f_sky, f_ground = view_factors(surface_tilt)
+    beta = float(np.sqrt(f_sky)) if sky_air_split else 1.0
+    return beta * f_sky, f_ground + (1.0 - beta) * f_sky
+
+
 def double_glazing_iam(
     aoi: npt.ArrayLike, n: float = 1.526, extinction: float = 4.0, thickness: float = 0.004
 ) -> np.ndarray:
