@@ -18,6 +18,7 @@ from scipy.sparse import csc_matrix
 from scipy.sparse.linalg import spsolve
 
 from bayescal.errors import SimulatorError
+from bayescal.runner import simulator_fingerprint
 from bayescal.simulators import solar
 from bayescal.simulators.base import Forcing, Simulator
 from bayescal.simulators.box import TestBox
@@ -305,6 +306,14 @@ def test_steady_coheating_power_under_a_cold_sky(split: bool) -> None:
     power = TestBox(mode="coheating", sky_air_split=split, **UCCLE, **EXPLICIT).simulate({}, f)
     hand = hand_power_under_a_cold_sky(25.0, t_out, t_sky, split)
     assert power["heating_power"][-1] == pytest.approx(hand, rel=5e-3)
+
+
+def test_sky_air_split_is_part_of_the_simulator_fingerprint() -> None:
+    # Stored runs are keyed by the simulator's fingerprint: runs made with one long-wave
+    # model must not be reused by a study that resumes with the other.
+    split, whole = (TestBox(mode="freefloat", sky_air_split=s, **UCCLE) for s in (True, False))
+    assert simulator_fingerprint(split) != simulator_fingerprint(whole)
+    assert simulator_fingerprint(split) == simulator_fingerprint(TestBox(mode="freefloat", **UCCLE))
 
 
 def test_sky_air_split_changes_nothing_when_the_sky_is_at_air_temperature() -> None:
