@@ -87,7 +87,7 @@ def energyplus_test_box(
         Outside: ``4 + 4 v`` W/(m²·K) with the weather file's wind speed ``v``
         (ISO 6946 annex C, a user curve) and EnergyPlus's long-wave exchange
         with sky, air and ground (a vertical face sees part of its sky view
-        at air temperature; the built-in box sees the sky alone).
+        at air temperature, as the built-in box does with ``sky_air_split``).
     Control
         ``"coheating"``: an unlimited ideal-loads system holds the zone air at
         the ``TempAirIn`` schedule (``temp_air_in``); ``heating_power`` [W] is
