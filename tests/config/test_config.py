@@ -17,6 +17,7 @@ from bayescal.config import (
     BoxSimulator,
     Study,
     WallSimulator,
+    build_simulator,
     load_study,
     study_from_dict,
 )
@@ -25,6 +26,7 @@ from bayescal.errors import ConfigError
 from bayescal.simulators.box import TestBox
 from bayescal.simulators.fvm import Layer
 from bayescal.simulators.wall import MultilayerWall
+from bayescal.simulators.wrappers import TargetedSimulator
 from paths import FIXTURES
 
 FIXTURE = FIXTURES / "wall-study"
@@ -441,6 +443,17 @@ def test_box_study() -> None:
         _validate(_then(_box, lambda r: r["simulator"].update(constants={"c_wal": 1.0})))
     with pytest.raises(ConfigError, match=r"needs the boundary condition 'wind_speed'"):
         _validate(_then(_box, lambda r: r["data"]["columns"].pop("wind_speed")))
+
+
+def test_box_sky_air_split_reaches_the_simulator() -> None:
+    def with_split(value: bool) -> Callable[[dict[str, Any]], None]:
+        return _then(_box, lambda r: r["simulator"].update(sky_air_split=value))
+
+    for setting in (None, False, True):
+        sim = build_simulator(_validate(_box if setting is None else with_split(setting)))
+        assert isinstance(sim, TargetedSimulator)
+        assert isinstance(sim.inner, TestBox)
+        assert sim.inner.sky_air_split is (setting is not False)  # on by default
 
 
 def test_simulator_sections_agree_with_the_simulators() -> None:

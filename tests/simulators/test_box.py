@@ -317,6 +317,9 @@ def test_sky_air_split_is_part_of_the_simulator_fingerprint() -> None:
 
 
 def test_sky_air_split_changes_nothing_when_the_sky_is_at_air_temperature() -> None:
+    # The split only moves view between the sky and the air temperature, so with the sky
+    # at air temperature both settings are the same box (the cold-sky test above checks
+    # that the split does change the exchange when they differ).
     n, step = 24 * 3, 3600.0
     ir = Stefan_Boltzmann * (5.0 + zero_Celsius) ** 4
     f = constant_forcing(n, step, temp_air_out=5.0, wind_speed=2.0, ir_horizontal=ir)
@@ -470,11 +473,11 @@ def test_sky_temperature_source_priority():
     ir = Stefan_Boltzmann * (t_sky + zero_Celsius) ** 4
     base = {k: v for k, v in w.items() if k != "relative_humidity"}
     start = np.datetime64("2013-03-10T00:00")
-    b = box("freefloat")
+    # The whole sky view at the sky temperature, where the sky's source matters most.
+    b = TestBox(mode="freefloat", sky_air_split=False, **UCCLE, **EXPLICIT)
     swinbank = b.simulate({}, Forcing(step, base, start))["temp_air_in"]
     with_ir = b.simulate({}, Forcing(step, {**w, "ir_horizontal": ir}, start))["temp_air_in"]
     with_rh = b.simulate({}, Forcing(step, w, start))["temp_air_in"]
     np.testing.assert_allclose(with_ir, swinbank, rtol=0, atol=1e-9)  # round-off in T^4 and back
-    # Berdahl–Martin's humid sky is warmer than Swinbank's here: a visible change
-    # (measured 0.080 K with the faces' sky view split between sky and air).
-    assert np.abs(with_rh - swinbank).max() > 0.04
+    # Berdahl–Martin's humid sky is warmer than Swinbank's here: a visible change.
+    assert np.abs(with_rh - swinbank).max() > 0.1

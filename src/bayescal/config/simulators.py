@@ -185,10 +185,11 @@ class BoxSimulator(SimulatorBase):
         "Sky-diffuse transposition model.", "perez", default="haydavies"
     )
     sky_air_split: bool = field_doc(
-        "Long-wave exchange of the faces: true divides each face's sky view as "
-        "EnergyPlus does (the part sqrt((1 + cos tilt)/2) at the sky temperature, the rest, "
-        "the sky near the horizon, at air temperature); false puts the whole sky view at "
-        "the sky temperature.",
+        "Long-wave exchange of the faces: true divides each face's sky view F_sky = "
+        "(1 + cos tilt)/2 as EnergyPlus does: the fraction beta = sqrt(F_sky) of it at the "
+        "sky temperature (beta F_sky: 0.354 for a wall, 1 for a roof), the rest, the sky "
+        "near the horizon, at air temperature; false puts the whole sky view at the sky "
+        "temperature.",
         False,
         default=True,
     )

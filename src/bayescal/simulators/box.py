@@ -603,15 +603,15 @@ def _radiation_constants(values: Mapping[str, float], geo: Geometry) -> tuple[np
 
 def _exterior(rad: tuple[np.ndarray, ...], d: Drivers, j: int, t_surf: np.ndarray) -> _Exterior:
     """Convective plus secant long-wave coefficients given surface temperatures ``t_surf``."""
-    c_sky, c_gnd = rad
+    c_sky, c_air = rad
     ts = t_surf + zero_Celsius
     ts2 = ts * ts
     tsky = d.temp_sky[j] + zero_Celsius
-    tgnd = d.temp_out[j] + zero_Celsius
+    tair = d.temp_out[j] + zero_Celsius
     h_sky = c_sky * (ts2 + tsky * tsky) * (ts + tsky)
-    h_gnd = c_gnd * (ts2 + tgnd * tgnd) * (ts + tgnd)
-    h_out = d.h_conv[j] + h_sky + h_gnd
-    num = (d.h_conv[j] + h_gnd) * d.temp_out[j] + h_sky * d.temp_sky[j]
+    h_air = c_air * (ts2 + tair * tair) * (ts + tair)
+    h_out = d.h_conv[j] + h_sky + h_air
+    num = (d.h_conv[j] + h_air) * d.temp_out[j] + h_sky * d.temp_sky[j]
     return _Exterior(h_out, num)
 
 
