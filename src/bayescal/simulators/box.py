@@ -77,11 +77,12 @@ from typing import ClassVar
 
 import numpy as np
 from scipy.constants import Stefan_Boltzmann, zero_Celsius
-from scipy.linalg import lapack, lu_factor, solve
+from scipy.linalg import solve
 
 from bayescal.errors import SimulatorError
 from bayescal.simulators import solar
 from bayescal.simulators.base import Forcing, check_parameters
+from bayescal.simulators.diagonal_update import DiagonalUpdateSolver
 from bayescal.simulators.fvm import Layer, Mesh, build_mesh
 
 FACES = ("front", "side_cw", "back", "side_ccw", "roof", "floor")
@@ -683,37 +684,6 @@ def _initial(
     return solve(*_steady_matrix(values, geo, sys, d, ext, mode)), ext
 
 
-@dataclass(frozen=True)
-class _Woodbury:
-    """Solve ``(A0 + sum_i delta_i e_i e_i^T) x = b`` for diagonal changes on a few nodes.
-
-    ``A0`` is factorised once; with ``Z = A0^-1 U`` (``U`` the columns ``e_i``),
-    ``x = x0 - Z (I + D U^T Z)^-1 D U^T x0`` where ``x0 = A0^-1 b``.
-    """
-
-    lu: np.ndarray
-    piv: np.ndarray
-    z: np.ndarray
-    zu: np.ndarray
-    index: np.ndarray
-    base: np.ndarray
-
-    @classmethod
-    def build(cls, a0: np.ndarray, index: np.ndarray, base: np.ndarray) -> _Woodbury:
-        lu, piv = lu_factor(a0, check_finite=False)
-        cols = np.zeros((a0.shape[0], index.size))
-        cols[index, np.arange(index.size)] = 1.0
-        z = lapack.dgetrs(lu, piv, cols)[0]
-        return cls(lu, piv, z, z[index, :], index, base)
-
-    def solve(self, rhs: np.ndarray, diagonal: np.ndarray) -> np.ndarray:
-        """Solution with the updated entries' values ``diagonal`` (base values + delta)."""
-        x0 = lapack.dgetrs(self.lu, self.piv, rhs)[0]
-        delta = diagonal - self.base
-        y = lapack.dgesv(np.eye(delta.size) + delta[:, None] * self.zu, delta * x0[self.index])[2]
-        return x0 - self.z @ y
-
-
 def _stepper(
     values: Mapping[str, float],
     geo: Geometry,
@@ -721,7 +691,7 @@ def _stepper(
     ext: _Exterior,
     dt: float,
     mode: str,
-) -> _Woodbury:
+) -> DiagonalUpdateSolver:
     """Backward-Euler matrix with the initial exterior coefficients, factorised."""
     a0 = np.diag(sys.capacity / dt) + sys.conduction
     base = geo.area * ext.h_out[:6]
@@ -729,11 +699,11 @@ def _stepper(
     if mode == "coheating":
         a0[sys.air, :] = 0.0
         a0[sys.air, sys.air] = sys.capacity[sys.air] / dt  # scaled identity row
-        return _Woodbury.build(a0, sys.outside, base)
+        return DiagonalUpdateSolver.build(a0, sys.outside, base)
     g_w = geo.window_area * float(_window_u(values, ext.h_out[6]))
     a0[sys.air, sys.air] += g_w
     a0[sys.air, sys.air] += values["ua_leak"]
-    return _Woodbury.build(a0, np.append(sys.outside, sys.air), np.append(base, g_w))
+    return DiagonalUpdateSolver.build(a0, np.append(sys.outside, sys.air), np.append(base, g_w))
 
 
 def _march(
