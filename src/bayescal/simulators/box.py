@@ -57,7 +57,7 @@ Time stepping
     The matrix changes each step only on the diagonal entries of the six
     outside-surface nodes and (free-float) of the air node; each step solves
     with a factorisation made once per run and a Woodbury correction of rank 6
-    or 7.
+    or 7 (:class:`~bayescal.simulators.diagonal_update.DiagonalUpdateSolver`).
 Modes
     ``"coheating"``: the inside air temperature ``temp_air_in`` is imposed; the
     output ``heating_power`` [W] is the heat that must be added to the air node

@@ -335,10 +335,10 @@ def longwave_view_factors(surface_tilt: float, sky_air_split: bool = True) -> tu
     long-wave irradiance is a hemispherical average, but the sky near the horizon,
     which is most of what a wall sees, radiates nearly at air temperature. With
     ``sky_air_split`` the sky view is divided as in EnergyPlus (Engineering
-    Reference, "Outside Surface Heat Balance", exterior long-wave radiation): the part
-    ``beta = sqrt((1 + cos tilt) / 2)`` exchanges with the sky temperature and
-    ``1 - beta`` with the air. A roof keeps its whole sky (beta 1); a wall sees
-    0.354 sky instead of 0.5.
+    Reference, "Outside Surface Heat Balance", exterior long-wave radiation): the
+    fraction ``beta = sqrt(F_sky)`` of the sky view exchanges with the sky
+    temperature and ``1 - beta`` of it with the air. A roof keeps its whole sky
+    (beta 1); a wall sees 0.354 sky instead of 0.5.
 
     Parameters
     ----------
