@@ -107,6 +107,60 @@ def test_short_chains_are_flagged(small: tuple[Assembled, Emulator]) -> None:
     assert any("ESS" in w for w in post.warnings)
 
 
+def test_failing_chains_are_extended_to_the_draws_of_longer_chains(
+    small: tuple[Assembled, Emulator],
+) -> None:
+    a, em = small
+    common = dict(n_chains=4, n_burn=30, seed=9, backend="vectorised")
+    asked: list[tuple[int, int]] = []
+
+    def on_extend(kept: int, longer: int) -> None:
+        asked.append((kept, longer))
+
+    # 4 x 50 draws cannot reach a bulk ESS of 400: extended by half at a time,
+    # 50 -> 75 -> 100 (the most), still flagged at the end.
+    grown = calibrate(em, a, n_draws=50, max_draws=100, on_extend=on_extend, **common)  # type: ignore[arg-type]
+    assert asked == [(50, 75), (75, 100)]
+    assert grown.draws.shape == (4, 100, 3)
+    assert not grown.diagnostics.ok
+    # Every kept length fills whole batches of 25, so the extended chains are those of
+    # one run of 100 draws, bit for bit: the extensions continued, nothing was redone.
+    direct = calibrate(em, a, n_draws=100, **common)  # type: ignore[arg-type]
+    np.testing.assert_array_equal(grown.draws, direct.draws)
+    np.testing.assert_array_equal(grown.log_density, direct.log_density)
+    # Chains that pass are not extended.
+    asked.clear()
+    passed = calibrate(em, a, n_chains=4, n_burn=500, n_draws=1000, seed=9, max_draws=4000,
+                       on_extend=on_extend, backend="vectorised")  # fmt: skip
+    assert passed.diagnostics.ok, passed.warnings
+    assert asked == []
+    assert passed.draws.shape == (4, 1000, 3)
+    with pytest.raises(ConfigError, match="max_draws must be >= n_draws = 50, got 40"):
+        calibrate(em, a, n_draws=50, max_draws=40, **common)  # type: ignore[arg-type]
+
+
+def test_a_calibration_killed_while_extending_resumes_at_that_length(
+    small: tuple[Assembled, Emulator], tmp_path: Path
+) -> None:
+    a, em = small
+    common = dict(n_chains=4, n_burn=30, n_draws=50, max_draws=100, seed=9, backend="vectorised",
+                  checkpoint_dir=tmp_path, checkpoint_seconds=0.0)  # fmt: skip
+    reference = calibrate(em, a, **{**common, "checkpoint_dir": tmp_path / "whole"})  # type: ignore[arg-type]
+    asked: list[tuple[int, int]] = []
+
+    def dies_in_the_last_round(kept: int, longer: int) -> Callable[[int], None] | None:
+        asked.append((kept, longer))
+        return _stop_after(4 * (30 + 90)) if longer == 100 else None
+
+    with pytest.raises(Stop):
+        calibrate(em, a, on_extend=dies_in_the_last_round, **common)  # type: ignore[arg-type]
+    assert asked == [(50, 75), (75, 100)]
+    asked.clear()
+    resumed = calibrate(em, a, on_extend=dies_in_the_last_round, **common)  # type: ignore[arg-type]
+    assert asked == []  # straight to 100 draws from the snapshots, no round repeated
+    np.testing.assert_array_equal(resumed.draws, reference.draws)
+
+
 def test_priors_must_keep_the_design_bounds(small: tuple[Assembled, Emulator]) -> None:
     a, em = small
     bad = dict(a.priors)

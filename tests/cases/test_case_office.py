@@ -48,7 +48,7 @@ SMALL = {
     "screening": "trajectories = 3\nthreshold = 0.2\nbootstrap = 50\nmax_parameters = 4\n",
     "design": "runs = 16\n",
     "emulator": "pca_variance = 0.99\nburn = 20\nsamples = 20\n",
-    "calibration": "chains = 4\nburn = 200\nsamples = 300\n",
+    "calibration": "chains = 4\nburn = 200\nsamples = 300\nmax_samples = 300\n",
     "predict": "draws = 20\n",
     "outputs": "calibrate = [" + ", ".join(f'"{o}"' for o in OUTPUTS) + "]\n",
 }

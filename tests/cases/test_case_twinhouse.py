@@ -53,6 +53,7 @@ chains = 4
 sampler = "mwg"
 burn = 400
 samples = 400
+max_samples = 400  # the reduced size as it is: no extension
 
 [discrepancy]
 enabled = false

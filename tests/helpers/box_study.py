@@ -20,6 +20,7 @@ samples = 100
 chains = 4
 burn = 300
 samples = 500
+max_samples = 500  # the reduced size as it is: no extension
 
 [discrepancy]
 enabled = false

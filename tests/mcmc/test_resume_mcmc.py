@@ -153,6 +153,69 @@ def test_interrupted_lockstep_groups_in_processes_resume_identically(
     np.testing.assert_array_equal(resumed, reference)
 
 
+# A finished run's last snapshot extends it: the same call with more draws resumes and
+# keeps sampling, with the draws of a run that asked for that many from the start.
+JOINT = MetropolisWithinGibbs(
+    n_burn=300,
+    lower=[0.0, -np.inf],
+    batch_size=25,
+    max_adapt=0.1,
+    joint=[0, 1],
+    joint_after_burn=2,
+    screen=True,
+)
+STARTS = [[1.0, 0.0], [2.0, 0.5], [0.5, -0.5], [1.5, 1.0]]
+
+
+def _extend(folder: Path, sampler: MetropolisWithinGibbs, backend: str, draws: int) -> tuple:
+    target = BatchTarget()
+    chains = run_chains(
+        sampler,
+        target,
+        STARTS,
+        draws,
+        seed=11,
+        backend=backend,  # type: ignore[arg-type]
+        max_workers=2,
+        checkpoint_dir=folder,
+        checkpoint_seconds=0.0,
+    )
+    return chains.draws, chains.log_density, chains.acceptance, target.calls
+
+
+@pytest.mark.parametrize("sampler", [SAMPLER, JOINT], ids=["gibbs", "joint-screened"])
+@pytest.mark.parametrize("backend", ["serial", "vectorised", "vectorised-processes"])
+def test_a_finished_run_extends_to_the_draws_of_a_longer_run(
+    tmp_path: Path, sampler: MetropolisWithinGibbs, backend: str
+) -> None:
+    longer = _extend(tmp_path / "reference", sampler, backend, 770)
+    _extend(tmp_path / "extended", sampler, backend, 500)  # kept sweeps fill 20 batches
+    draws, lps, acceptance, calls = _extend(tmp_path / "extended", sampler, backend, 770)
+    np.testing.assert_array_equal(draws, longer[0])
+    np.testing.assert_array_equal(lps, longer[1])
+    np.testing.assert_allclose(acceptance, longer[2], rtol=1e-12)
+    if backend == "serial":  # evaluations in this process: only the extra 270 sweeps
+        assert 0 < calls < longer[3] / 3
+    # A snapshot that has run past the requested length is not cut back: a fresh run.
+    shorter = _extend(tmp_path / "extended", sampler, backend, 400)
+    fresh = _extend(tmp_path / "fresh", sampler, backend, 400)
+    np.testing.assert_array_equal(shorter[0], fresh[0])
+
+
+@pytest.mark.parametrize("backend", ["serial", "vectorised"])
+def test_a_run_ending_in_a_short_batch_extends_its_own_chains(tmp_path: Path, backend: str) -> None:
+    # 510 kept sweeps end in a batch of 10: a generator draws a batch's numbers at once,
+    # so the extension continues these chains (same state, frozen widths) without
+    # matching a run of 770 from the start; it is reproducible and keeps the 510 draws.
+    first = _extend(tmp_path / "a", JOINT, backend, 510)
+    extended = _extend(tmp_path / "a", JOINT, backend, 770)
+    _extend(tmp_path / "b", JOINT, backend, 510)
+    again = _extend(tmp_path / "b", JOINT, backend, 770)
+    np.testing.assert_array_equal(extended[0][:, :510], first[0])
+    np.testing.assert_array_equal(extended[0], again[0])
+    assert np.all(np.isfinite(extended[1]))
+
+
 SCRIPT = """
 import sys
 from bayescal.config import load_study

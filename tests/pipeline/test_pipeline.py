@@ -101,6 +101,27 @@ def test_predictions_dataset_follows_the_layout(first: tuple[Path, Results]) -> 
     assert np.all(cal[ok] <= hi[ok])
 
 
+def test_failing_chains_are_extended_and_a_short_stop_is_loud(tmp_path: Path) -> None:
+    folder = _study(tmp_path, method="emulator")
+    path = folder / "study.toml"
+    text = path.read_text(encoding="utf-8")
+    assert "burn = 400\nsamples = 600\n" in text
+    path.write_text(text.replace("burn = 400\nsamples = 600\n", "burn = 100\nsamples = 40\n"
+                                 "max_samples = 30\n"), "utf-8")  # fmt: skip
+    with pytest.raises(ConfigError, match=r"max_samples \(30\) is below samples \(40\)"):
+        load_study(folder)
+    path.write_text(path.read_text("utf-8").replace("max_samples = 30", "max_samples = 60"))
+    said: list[str] = []
+    res = run(load_study(folder), until="calibrate", options=SERIAL, say=said.append)
+    assert res.posterior is not None
+    # 4 x 40 draws cannot pass (bulk ESS >= 400): extended by half, to the most, 60.
+    assert res.posterior.draws.shape[1] == 60
+    assert "calibration: chains extended from 40 to 60 kept draws (still failing)" in said
+    loud = [line for line in said if line.startswith("WARNING: the calibration did NOT")]
+    assert len(loud) == 1
+    assert "max_samples = 60 kept draws per chain" in loud[0]
+
+
 def test_second_run_reuses_everything(first: tuple[Path, Results]) -> None:
     folder, res = first
     again = run(load_study(folder), until="predict", options=SERIAL)
@@ -121,7 +142,9 @@ def test_a_changed_setting_reruns_only_later_stages(tmp_path: Path) -> None:
     assert res.reused == ("design", "simulate", "emulator")
     assert res.ran == ("calibrate", "discrepancy", "predict")
     assert res.posterior is not None
-    assert res.posterior.draws.shape[1] == 500
+    # 500 kept draws, or as far as [calibration] max_samples (4 x 500) extended them
+    # by half at a time until the diagnostics passed.
+    assert res.posterior.draws.shape[1] in (500, 750, 1125, 1687, 2000)
     # Emulator predictions: no posterior runs were added to the run cache.
     runs_after = sorted((folder / "out" / "simulations" / "runs").iterdir())
     assert set(runs_before) < set(runs_after)

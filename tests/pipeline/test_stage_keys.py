@@ -13,7 +13,10 @@ not be reused); the predict key and the report's changed with ``[predict] noise`
 (the simulator route's noise estimated from the runs' training residuals, so
 bands computed before are recomputed); with ``[predict] method = "emulator"`` the
 predict key carries the emulator's conditioning on the test window's runs
-(predictions of the emulator route made before are recomputed). A change of a key makes every
+(predictions of the emulator route made before are recomputed); the calibrate key and
+those after it changed with ``[calibration] max_samples`` (chains extended until they
+pass their diagnostics: a calibration that failed them before is run again, extended,
+not reused). A change of a key makes every
 existing output folder recompute that stage and all later ones; if a change is
 meant, say so in the release notes and update the pins.
 """
@@ -32,15 +35,15 @@ WALL_KEYS = {
     "design": "4f30b4a1eb437cae26ee0031fd9431c9e0c4a8a50e25dbb93719d364e12c98d0",
     "simulate": "3ac9b12d13480b4a96017530c534370bb276b4f31b42d7209258b214aa91cc04",
     "emulator": "64db760bda8e3e331f4b3b8a876ef5aebb80316a6adc975b8cedd60066bda342",
-    "calibrate": "fa0b4481aebc35d7b5b9c062436a00b06420bb92f428cb1ca537b2f3a55a11d1",
-    "discrepancy": "c74a5337fa82f3296b8ab70225785109199f8d84b8da3193018d021672ba809d",
-    "predict": "8c4bfce13e04ec936273e56dc354f328c4202a82b9f30cf34799ce87333ed036",
-    "report": "37ba132640c26fe5f1dcec7b6296b1ecc4528be13004d9db38d916d79bf8c127",
+    "calibrate": "bab0c45f41e91cf44f04072e25cbd92c406d6b8e69cecd7bf6cb0d54f0806410",
+    "discrepancy": "800632b36cd67f4fb7e17681c70cbfa4a45bc9a7657841b1d6e24682a435bd34",
+    "predict": "72d26fdc75c824f31eab2c84639a71a4b718bd4c5822ef50d904ae4b04dad641",
+    "report": "118b301533443810b6466ef145c0e4c1379880b0d3f3cfe366b9c2fde4b6dc15",
 }
 
 
 #: The wall example's predict key with ``[predict] method = "emulator"``.
-EMULATOR_ROUTE_PREDICT_KEY = "1506db07f4cfecdc5e1bb27eb83768ff989a1054900ee88763fcb79d87fe9643"
+EMULATOR_ROUTE_PREDICT_KEY = "e9037c5b27aae14fcb502c6304ffaf5bdb43f50ff81143d37d5961738af11e3f"
 
 
 def test_stage_keys_of_the_wall_example_are_pinned(tmp_path: Path) -> None:

@@ -17,9 +17,11 @@ import pytest
 import xarray as xr
 
 from bayescal.calibration.posterior import Posterior, calibrate
+from bayescal.config import load_study
 from bayescal.emulator.assemble import Assembled, assemble
 from bayescal.emulator.gp import Emulator, LooResult
 from bayescal.emulator.training import train
+from bayescal.examples import copy_example
 from bayescal.metrics import KEY_COLUMNS, metric_columns
 from bayescal.pipeline.predict import (
     delta_series,
@@ -27,9 +29,10 @@ from bayescal.pipeline.predict import (
     predict_band,
     predictions_dataset,
 )
+from bayescal.pipeline.stages import prepare
 from bayescal.report import figures as fg
 from bayescal.report.html import ReportInputs, render, write_report
-from bayescal.report.study import delta_correlation
+from bayescal.report.study import delta_correlation, report_settings
 from bayescal.runner import RunFailure
 from virtual_wall import PRIORS, VirtualExperiment, simulate, virtual_experiment
 
@@ -333,3 +336,19 @@ def test_delta_correlation_of_the_report(parts: Parts) -> None:
     np.testing.assert_allclose(
         table[reference.columns].to_numpy(float), reference.to_numpy(float), rtol=1e-12
     )
+
+
+def test_settings_say_how_far_the_calibration_may_be_extended(tmp_path: Path) -> None:
+    folder = copy_example("wall", tmp_path / "wall")
+    path = folder / "study.toml"
+    text = path.read_text(encoding="utf-8")
+    ctx = prepare(load_study(folder))
+    cal = ctx.study.calibration
+    shown = report_settings(ctx.study, ctx.measured.layout)["calibration MCMC"]
+    longer = f", extended up to {4 * cal.samples} until converged"
+    assert str(shown).endswith(f"({cal.burn} + {cal.samples}{longer})")
+    fixed = f"[calibration]\nmax_samples = {cal.samples}\n"
+    path.write_text(text.replace("[calibration]\n", fixed), encoding="utf-8")
+    ctx = prepare(load_study(folder))
+    shown = report_settings(ctx.study, ctx.measured.layout)["calibration MCMC"]
+    assert str(shown).endswith(f"({cal.burn} + {cal.samples})")

@@ -28,12 +28,16 @@ from __future__ import annotations
 import dataclasses
 import os
 from collections.abc import Callable, Mapping, Sequence
+from contextlib import ExitStack
 from dataclasses import dataclass, field
+from pathlib import Path
+from tempfile import TemporaryDirectory
 from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 from numpy.typing import ArrayLike
 
+from bayescal.atomic import atomic_write_json, read_json
 from bayescal.calibration.hmc import sample_nuts_isolated
 from bayescal.calibration.kron import Kind
 from bayescal.calibration.target import (
@@ -50,7 +54,7 @@ from bayescal.emulator.gp import Emulator
 from bayescal.emulator.kernel import FloatArray
 from bayescal.emulator.noise import ObservationModel, OutputNoise
 from bayescal.errors import ConfigError
-from bayescal.mcmc.chains import BACKENDS, ChainBackend
+from bayescal.mcmc.chains import BACKENDS, ChainBackend, Chains
 from bayescal.mcmc.diagnostics import Diagnostics, diagnose, import_arviz
 from bayescal.mcmc.nuts import NUTS_MIN_WARMUP, check_installed
 
@@ -329,6 +333,8 @@ def calibrate(
     checkpoint_seconds: float = 30.0,
     observations: ObservationModel | None = None,
     moves: Moves = "gibbs",
+    max_draws: int | None = None,
+    on_extend: Callable[[int, int], Callable[[int], None] | None] | None = None,
 ) -> Posterior:
     """Sample theta*, lambda and lambda* (eq. 16) with the hyperparameters at the MAP.
 
@@ -381,6 +387,18 @@ def calibrate(
     moves
         ``"gibbs"`` (default) or ``"joint"``: how the ``"mwg"`` sweeps move the
         coordinates after burn-in (:func:`bayescal.calibration.target.default_sampler`).
+    max_draws
+        Length by convergence (``"mwg"`` only): while a diagnostic fails (R-hat
+        above 1.01, bulk or tail ESS below 400, a stuck chain), the chains are
+        extended by half their kept length at a time, at most to ``max_draws``
+        kept draws per chain. Each extension resumes the chains' last snapshots
+        (in ``checkpoint_dir``, else a temporary folder), so no sweep is redone:
+        the extended chains are those that ran, continued with their proposal
+        widths as burn-in left them. ``None`` (default): ``n_draws`` exactly.
+    on_extend
+        Called as ``on_extend(kept, longer)`` before each extension; it may
+        return a new progress callback for the extension (else ``callback``
+        keeps counting).
 
     Returns
     -------
@@ -425,20 +443,82 @@ def calibrate(
         return _calibrate_nuts(
             target, starts, prior_map, assembled.parameter_names, n_burn, n_draws, seed, callback
         )
-    chains = sample(
-        target,
-        n_draws,
-        n_burn=n_burn,
-        n_chains=n_chains,
-        seed=seed,
-        backend=backend,
-        names=(*assembled.parameter_names, *target.aux_names),
-        callback=callback,
-        checkpoint_dir=checkpoint_dir,
-        checkpoint_seconds=checkpoint_seconds,
-        starts=starts,
-        moves=moves,
-    )
+    most = n_draws if max_draws is None else int(max_draws)
+    if most < n_draws:
+        raise ConfigError(f"max_draws must be >= n_draws = {n_draws}, got {most}")
+    with ExitStack() as stack:
+        if most > n_draws and checkpoint_dir is None:
+            checkpoint_dir = stack.enter_context(TemporaryDirectory(prefix="bayescal-chains-"))
+        plan: dict[str, object] = {
+            "n_draws": n_draws,
+            "max_draws": most,
+            "n_burn": n_burn,
+            "n_chains": n_chains,
+            "seed": int(seed),
+            "moves": moves,
+        }
+        kept = _extended_length(checkpoint_dir, plan, n_draws, most) or n_draws
+        while True:
+            chains = sample(
+                target,
+                kept,
+                n_burn=n_burn,
+                n_chains=n_chains,
+                seed=seed,
+                backend=backend,
+                names=(*assembled.parameter_names, *target.aux_names),
+                callback=callback,
+                checkpoint_dir=checkpoint_dir,
+                checkpoint_seconds=checkpoint_seconds,
+                starts=starts,
+                moves=moves,
+            )
+            post = _built(chains, target, prior_map, assembled, seed, algebra, observations)
+            if post.diagnostics.ok or kept >= most:
+                return post
+            longer = min(most, kept + max(1, kept // 2))
+            if on_extend is not None:
+                callback = on_extend(kept, longer) or callback
+            assert checkpoint_dir is not None  # a temporary folder where none was given
+            atomic_write_json(Path(checkpoint_dir) / EXTENSION_FILE, plan | {"kept": longer})
+            kept = longer
+
+
+EXTENSION_FILE = "extension.json"
+"""Beside the chains' snapshots: the length a calibration was being extended to."""
+
+
+def _extended_length(
+    folder: str | os.PathLike[str] | None, plan: dict[str, object], least: int, most: int
+) -> int | None:
+    """The length a killed calibration with the same plan was being extended to.
+
+    The rounds before it failed their diagnostics with draws that depend on the seed
+    only, so a resumed calibration goes straight to that length (its snapshots hold
+    the sweeps already done) instead of repeating the rounds and their checks.
+    """
+    if folder is None:
+        return None
+    try:
+        found = read_json(Path(folder) / EXTENSION_FILE)
+    except (OSError, ValueError):
+        return None
+    if not isinstance(found, dict) or {k: found.get(k) for k in plan} != plan:
+        return None
+    kept = found.get("kept")
+    return kept if isinstance(kept, int) and least <= kept <= most else None
+
+
+def _built(
+    chains: Chains,
+    target: CalibrationPosterior,
+    prior_map: dict[str, Prior],
+    assembled: Assembled,
+    seed: int,
+    algebra: Kind,
+    observations: ObservationModel | None,
+) -> Posterior:
+    """The posterior of the ``"mwg"`` chains of :func:`calibrate`, with its diagnostics."""
     draws = chains.draws
     t = target.t
     return Posterior.build(

@@ -43,6 +43,7 @@ from bayescal.config.base import (
     raise_problems,
     resolve_path,
 )
+from bayescal.config.calibration import CalibrationSection
 from bayescal.config.data import DataSection
 from bayescal.config.discrepancy import DiscrepancySection
 from bayescal.config.messages import format_errors
@@ -231,37 +232,6 @@ class EmulatorSection(Section):
         if self.pca_components is not None and "pca_variance" in self.model_fields_set:
             raise ValueError("give pca_variance or pca_components, not both")
         return self
-
-
-class CalibrationSection(Section):
-    """``[calibration]``: MCMC for theta* and the precisions."""
-
-    chains: int = field_doc("Independent chains (>= 4 for R-hat).", 4, default=4, ge=4)
-    burn: int = field_doc("Burn-in iterations per chain.", 2000, default=2000, ge=0)
-    samples: int = field_doc("Iterations kept per chain.", 5000, default=5000, ge=1)
-    seed: int | None = field_doc(
-        "Seed; derived from [study].seed if omitted.", 2, default=None, ge=0
-    )
-    sampler: Literal["mwg", "nuts"] = field_doc(
-        "MCMC sampler: 'mwg' (Metropolis-within-Gibbs) or 'nuts' (No-U-Turn with JAX, in a "
-        'spawned process; needs `pip install "bayescal[hmc]"`; burn is its warm-up, 500 '
-        "burn + 1000 samples are plenty; no checkpoints). 'mwg' is the default: on the "
-        "virtual wall (30 runs x 25 days, benchmarks/bench_hmc.py) NUTS drew about 3.8x "
-        "the bulk ESS of theta* per CPU second while sampling, but its fixed cost (JIT "
-        "compilation 5-6.5 CPU s, process start-up 2 s) left a whole default-length "
-        "calibration no faster (min ESS per CPU second 386 vs 389, about 10 s each), and "
-        "'mwg' needs no extra package and resumes from checkpoints.",
-        "nuts",
-        default="mwg",
-    )
-    moves: Literal["gibbs", "joint"] = field_doc(
-        "'gibbs': each coordinate moves alone, then the parameters jointly, every sweep. "
-        "'joint': from mid burn-in the parameters, lambda* and AR(1) phi move only together "
-        "(covariance learnt from them; proposals screened by a stand-in: delayed acceptance)"
-        ": Twin House 7-8x the ESS per evaluation, fewer evaluations; office worse: check.",
-        "joint",
-        default="gibbs",
-    )
 
 
 class PredictSection(Section):

@@ -337,7 +337,7 @@ def run_delta_chains(
     u0 = np.atleast_2d(np.asarray(starts, dtype=float))
     n_chains, t = u0.shape
     rngs = [np.random.default_rng(c) for c in np.random.SeedSequence(seed).spawn(n_chains)]
-    fp = fingerprint(settings, u0, settings.max_draws, [r.bit_generator.state for r in rngs])
+    fp = fingerprint(settings, u0, [r.bit_generator.state for r in rngs])
     loop = _Loop(phase, likelihood, settings, rngs, list(names or [f"x{i}" for i in range(t)]))
     resumed = None if checkpoint is None else checkpoint.load(fp)
     state = loop.fresh(u0, whitening) if resumed is None else loop.restore(*resumed)

@@ -337,6 +337,7 @@ def _calibration(r: _Runner, em: EmulatorResult) -> Posterior:
     post = calibrate_stage(r.ctx, em, checkpoint_dir=r.checkpoints("calibrate"))
     posterior_store.save_posterior(post, r.out / posterior_store.FILE, r.ctx.study.config_hash())
     posterior_store.save_posterior_summary(post, r.out / posterior_store.SUMMARY_FILE)
+    _say_calibration_length(r, post)
     for w in post.warnings:
         r.logger.warning("calibration: %s", w)
         r.say(f"warning: {w}")
@@ -346,6 +347,26 @@ def _calibration(r: _Runner, em: EmulatorResult) -> Posterior:
         r.say(f"hint: {hint}")
     r.finish("calibrate", [posterior_store.FILE, posterior_store.SUMMARY_FILE], start)
     return post
+
+
+def _say_calibration_length(r: _Runner, post: Posterior) -> None:
+    """How long the chains ran when [calibration] max_samples let them grow; loud when
+    they still failed their diagnostics at that length."""
+    cal = r.ctx.study.calibration
+    if cal.sampler != "mwg" or cal.most_samples == cal.samples:
+        return
+    kept = post.draws.shape[1]
+    if kept > cal.samples:
+        verdict = "every diagnostic passes" if post.diagnostics.ok else "still failing"
+        r.say(f"calibration: chains extended from {cal.samples} to {kept} kept draws ({verdict})")
+    if not post.diagnostics.ok:
+        text = (
+            f"the calibration did NOT converge within [calibration] max_samples = "
+            f"{cal.most_samples} kept draws per chain; its intervals are unreliable: raise "
+            "max_samples or burn, or try moves = 'joint'"
+        )
+        r.logger.warning("calibration: %s", text)
+        r.say(f"WARNING: {text}")
 
 
 def _gibbs_moves(study: Study) -> bool:

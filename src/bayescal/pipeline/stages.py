@@ -334,6 +334,14 @@ def calibrate_stage(
     section = ctx.study.calibration
     total = section.chains * (section.burn + section.samples)
     tick, close = _mcmc_tick(ctx, "calibration", total)
+
+    def extend(kept: int, longer: int) -> Tick | None:
+        nonlocal close
+        close()
+        label = f"calibration, extended to {longer} draws"
+        new_tick, close = _mcmc_tick(ctx, label, section.chains * (section.burn + longer))
+        return new_tick
+
     try:
         post = calibrate(
             em.emulator,
@@ -351,6 +359,8 @@ def calibrate_stage(
             checkpoint_seconds=ctx.options.checkpoint_seconds,
             observations=em.assembled.observations,
             moves=section.moves,
+            max_draws=section.most_samples,
+            on_extend=extend,
         )
     finally:
         close()

@@ -63,6 +63,14 @@ def delta_correlation(predictions: xr.Dataset) -> pd.DataFrame:
     return pd.DataFrame(table).T
 
 
+def _calibration_longer(study: Study) -> str:
+    """``", extended up to N until converged"`` where ``max_samples`` lets the chains grow."""
+    cal = study.calibration
+    if cal.sampler != "mwg" or cal.most_samples == cal.samples:
+        return ""
+    return f", extended up to {cal.most_samples} until converged"
+
+
 def report_settings(
     study: Study, layout: PeriodLayout, emulator: Emulator | None = None
 ) -> dict[str, object]:
@@ -86,7 +94,8 @@ def report_settings(
         "test samples": layout.test,
         "emulator MCMC (burn + kept, 2 chains)": f"{s.emulator.burn} + {s.emulator.samples}",
         "calibration MCMC": f"{SAMPLER_NAMES[s.calibration.sampler]}, "
-        f"{s.calibration.chains} chains x ({s.calibration.burn} + {s.calibration.samples})",
+        f"{s.calibration.chains} chains x ({s.calibration.burn} + {s.calibration.samples}"
+        f"{_calibration_longer(s)})",
         "algebra": s.emulator.algebra,
         "discrepancy": s.discrepancy.enabled,
         "seed": s.study.seed,

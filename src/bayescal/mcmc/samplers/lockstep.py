@@ -236,7 +236,7 @@ def run_lockstep(
         chains.s = _initial_states(sampler, target, x, box, joint)
 
     schedule = Schedule(sampler.n_burn, n_draws, sampler.thin, sampler.batch_size)
-    fp = fingerprint(sampler, x, n_draws, rng_states)
+    fp = fingerprint(sampler, x, rng_states)
     draws, lps = schedule.run(chains, start, checkpoint, fp, x.shape)
     return _results(sampler, chains.s, draws, lps, active, joint, n_draws, rng_states)
 

@@ -234,7 +234,7 @@ class MetropolisWithinGibbs:
             self.screen,
         )
         chain = _Chain(self, loop, rng, active)
-        fp = fingerprint(self, x, n_draws, rng_state)
+        fp = fingerprint(self, x, rng_state)
 
         def start() -> None:
             chain.s = self._initial_state(log_density, x, box)

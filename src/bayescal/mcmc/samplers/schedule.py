@@ -13,7 +13,14 @@ checkpoint.ChainCheckpoint`): the chain set's state (points, sampling-scale
 values, proposal widths, acceptance counts), the draws kept so far and every
 generator's state, so that a killed run resumes with the draws of an
 uninterrupted one. A snapshot is resumed only if its fingerprint (settings,
-starting points, number of draws, the generators' initial states) matches.
+starting points, the generators' initial states) matches and it has not run
+past the requested length. The last batch always writes one, so a finished
+run can be *extended*: the same call with more draws resumes it and keeps
+sampling from the chains' state, widths frozen after burn-in as they were. When
+the first run's kept sweeps fill whole batches, the result equals the draws of a
+run that had asked for that many from the start; otherwise (a batch draws its
+random numbers at once, so a short last batch shifts the stream) it is another,
+equally valid continuation of the same chains, reproducible from the seed.
 """
 
 from __future__ import annotations
@@ -44,9 +51,14 @@ def batch_sizes(total: int, batch: int) -> list[int]:
     return sizes
 
 
-def fingerprint(settings: object, x0: FloatArray, n_draws: int, rng_states: Any) -> str:
-    """What a snapshot must match to be resumed: settings, start, length and seeds."""
-    text = json.dumps([repr(settings), x0.tolist(), n_draws, rng_states], default=str)
+def fingerprint(settings: object, x0: FloatArray, rng_states: Any) -> str:
+    """What a snapshot must match to be resumed: settings, start and seeds.
+
+    Not the number of draws: a finished run's last snapshot is where a longer run
+    with the same settings stands after as many sweeps, so it extends the run
+    (:meth:`Schedule.run`).
+    """
+    text = json.dumps([repr(settings), x0.tolist(), rng_states], default=str)
     return hashlib.sha256(text.encode()).hexdigest()
 
 
@@ -101,11 +113,6 @@ class Schedule:
         """Sizes of the burn-in batches."""
         return batch_sizes(self.n_burn, self.batch_size)
 
-    @property
-    def batches(self) -> list[int]:
-        """Sizes of all batches, burn-in first."""
-        return self.burn + batch_sizes(self.n_draws * self.thin, self.batch_size)
-
     def run(
         self,
         chains: ChainSet,
@@ -114,7 +121,7 @@ class Schedule:
         fingerprint: str,
         draw_shape: Sequence[int],
     ) -> tuple[FloatArray, FloatArray]:
-        """Run every batch (resuming a matching snapshot); the kept draws and log-densities.
+        """Run the batches, resuming or extending a matching snapshot: draws, log-densities.
 
         Parameters
         ----------
@@ -134,10 +141,12 @@ class Schedule:
         draws, log_density
             ``(n_draws, *draw_shape)`` and ``(n_draws, *draw_shape[:-1])``.
         """
-        burn, batches = self.burn, self.batches
+        burn, total = self.burn, self.n_burn + self.n_draws * self.thin
         kept: list[Kept] = []
         first, n_done = 0, 0
         resumed = None if checkpoint is None else checkpoint.load(fingerprint)
+        if resumed is not None and int(resumed[1]["n_done"]) > total:
+            resumed = None  # a longer run's snapshot: it cannot be cut back
         if resumed is None:
             start()
         else:
@@ -145,21 +154,26 @@ class Schedule:
             chains.restore(arrays, meta)
             first, n_done = int(meta["next_batch"]), int(meta["n_done"])
             kept = list(zip(arrays["draws"], arrays["lps"].tolist(), strict=True))
-        for index in range(first, len(batches)):
-            size = batches[index]
-            if index < len(burn):
+        index = first
+        for size in burn[first:] if n_done < self.n_burn else []:
+            chains.reset_counts()
+            chains.block(size, n_done, 0, 0)
+            chains.adapt(size, index + 1)
+            if index == len(burn) - 1:
                 chains.reset_counts()
-                chains.block(size, n_done, 0, 0)
-                chains.adapt(size, index + 1)
-                if index == len(burn) - 1:
-                    chains.reset_counts()
-            else:
-                if index == 0:
-                    chains.reset_counts()
-                kept.extend(chains.block(size, n_done, self.thin, self.n_burn))
             n_done += size
-            if checkpoint is not None and (checkpoint.due() or index == len(batches) - 1):
-                self._snapshot(chains, checkpoint, fingerprint, index + 1, n_done, kept, draw_shape)
+            index += 1
+            if checkpoint is not None and checkpoint.due():
+                self._snapshot(chains, checkpoint, fingerprint, index, n_done, kept, draw_shape)
+        rest = batch_sizes(total - n_done, self.batch_size)
+        for j, size in enumerate(rest):
+            if n_done == 0:
+                chains.reset_counts()
+            kept.extend(chains.block(size, n_done, self.thin, self.n_burn))
+            n_done += size
+            index += 1
+            if checkpoint is not None and (checkpoint.due() or j == len(rest) - 1):
+                self._snapshot(chains, checkpoint, fingerprint, index, n_done, kept, draw_shape)
         draws = np.array([k[0] for k in kept], dtype=float).reshape(self.n_draws, *draw_shape)
         lps = np.array([k[1] for k in kept], dtype=float).reshape(self.n_draws, *draw_shape[:-1])
         return draws, lps
