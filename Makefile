@@ -29,9 +29,12 @@ $(STAMP): pyproject.toml | $(BIN)/python
 demo: $(STAMP)
 	$(BIN)/python -m bayescal.demo
 
-# The fast suite: every test not marked slow (issue 18: minutes on 2 cores).
+# The fast suite: every test not marked slow (issue 18: minutes on 2 cores), its test
+# files spread over one worker process per core (pytest-xdist; a file's tests and
+# fixtures stay in one worker). PYTEST_WORKERS=0 runs them in this process.
+PYTEST_WORKERS ?= auto
 test: $(STAMP)
-	$(BIN)/python -m pytest -m "not slow"
+	$(BIN)/python -m pytest -m "not slow" -n $(PYTEST_WORKERS) --dist loadfile
 
 # The slow tests (full-size statistical and physics runs, the case studies) except the
 # coverage experiments of tests/validation, which `make validate` runs at full size.

@@ -358,7 +358,9 @@ def _say_calibration_length(r: _Runner, post: Posterior) -> None:
     kept = post.draws.shape[1]
     if kept > cal.samples:
         verdict = "every diagnostic passes" if post.diagnostics.ok else "still failing"
-        r.say(f"calibration: chains extended from {cal.samples} to {kept} kept draws ({verdict})")
+        text = f"chains extended from {cal.samples} to {kept} kept draws ({verdict})"
+        r.logger.info("calibration: %s", text)
+        r.say(f"calibration: {text}")
     if not post.diagnostics.ok:
         text = (
             f"the calibration did NOT converge within [calibration] max_samples = "
