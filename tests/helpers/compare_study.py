@@ -103,6 +103,7 @@ samples = 20
 chains = 4
 burn = 150
 samples = 200
+max_samples = 200
 """
 
 

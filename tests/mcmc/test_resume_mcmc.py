@@ -234,6 +234,7 @@ samples = 100
 chains = 4
 burn = 600
 samples = 1500
+max_samples = 1500
 """
 
 

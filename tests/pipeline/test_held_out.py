@@ -57,6 +57,7 @@ samples = 100
 chains = 4
 burn = 1000
 samples = 1000
+max_samples = 1000
 
 [discrepancy]
 enabled = false

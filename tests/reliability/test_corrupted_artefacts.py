@@ -34,6 +34,7 @@ samples = 100
 chains = 4
 burn = 100
 samples = 200
+max_samples = 200
 """
 UNTIL = "calibrate"
 

@@ -41,6 +41,7 @@ samples = 100
 chains = 4
 burn = 100
 samples = 200
+max_samples = 200
 
 [predict]
 method = "emulator"

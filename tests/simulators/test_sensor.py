@@ -54,6 +54,7 @@ samples = 200
 chains = 4
 burn = 600
 samples = 900
+max_samples = 900
 
 [predict]
 method = "simulator"
