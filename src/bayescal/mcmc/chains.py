@@ -198,8 +198,10 @@ def run_chains(
         ``lockstep.npz`` for all chains with ``"vectorised"``, one
         ``lockstep-<g>.npz`` per group with ``"vectorised-processes"``), written between
         batches at most every ``checkpoint_seconds``; matching snapshots found
-        there are resumed, so a killed run continues with identical draws. The
-        sampler must accept ``checkpoint=`` (Metropolis-within-Gibbs does).
+        there are resumed, so a killed run continues with identical draws, and a
+        finished run called again with more ``n_draws`` continues its chains
+        (:mod:`bayescal.mcmc.samplers.schedule`). The sampler must accept
+        ``checkpoint=`` (Metropolis-within-Gibbs does).
     checkpoint_seconds
         Minimum wall time between two snapshots of a chain. [s]
 
