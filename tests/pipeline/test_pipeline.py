@@ -121,6 +121,7 @@ def test_failing_chains_are_extended_and_a_short_stop_is_loud(tmp_path: Path) ->
     loud = [line for line in said if line.startswith("WARNING: the calibration did NOT")]
     assert len(loud) == 1
     assert "max_samples = 60 kept draws per chain" in loud[0]
+    assert loud[0].endswith("raise max_samples or burn, or try moves = 'joint'")
 
 
 def test_second_run_reuses_everything(first: tuple[Path, Results]) -> None:

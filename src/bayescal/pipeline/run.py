@@ -365,7 +365,7 @@ def _say_calibration_length(r: _Runner, post: Posterior) -> None:
         text = (
             f"the calibration did NOT converge within [calibration] max_samples = "
             f"{cal.most_samples} kept draws per chain; its intervals are unreliable: raise "
-            "max_samples or burn, or try moves = 'joint'"
+            "max_samples or burn" + (", or try moves = 'joint'" if cal.moves == "gibbs" else "")
         )
         r.logger.warning("calibration: %s", text)
         r.say(f"WARNING: {text}")
