@@ -26,6 +26,7 @@ from bayescal.mcmc import (
     run_chains,
     to_inference_data,
 )
+from bayescal.mcmc.diagnostics import extended_length
 
 
 def import_arviz() -> Any:
@@ -199,3 +200,11 @@ def test_sampled_chains_end_to_end(sampler: Any) -> None:
 
 def standard_normal_2d(x: NDArray[np.float64]) -> float:
     return -0.5 * float(x @ x)
+
+
+def test_failing_chains_grow_by_half_up_to_the_most() -> None:
+    # the calibration's and the difference-process phase's common rule
+    assert [extended_length(n, 8000) for n in (2000, 3000, 4500, 6750)] == [3000, 4500, 6750, 8000]
+    assert extended_length(3, 10) == 5  # ceil(4.5)
+    assert extended_length(1, 10) == 2  # at least one draw more
+    assert extended_length(100, 130, growth=2.0) == 130

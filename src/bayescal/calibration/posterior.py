@@ -55,7 +55,7 @@ from bayescal.emulator.kernel import FloatArray
 from bayescal.emulator.noise import ObservationModel, OutputNoise
 from bayescal.errors import ConfigError
 from bayescal.mcmc.chains import BACKENDS, ChainBackend, Chains
-from bayescal.mcmc.diagnostics import Diagnostics, diagnose, import_arviz
+from bayescal.mcmc.diagnostics import Diagnostics, diagnose, extended_length, import_arviz
 from bayescal.mcmc.nuts import NUTS_MIN_WARMUP, check_installed
 
 if TYPE_CHECKING:
@@ -476,7 +476,7 @@ def calibrate(
             post = _built(chains, target, prior_map, assembled, seed, algebra, observations)
             if post.diagnostics.ok or kept >= most:
                 return post
-            longer = min(most, kept + max(1, kept // 2))
+            longer = extended_length(kept, most)
             if on_extend is not None:
                 callback = on_extend(kept, longer) or callback
             assert checkpoint_dir is not None  # a temporary folder where none was given

@@ -64,3 +64,8 @@ class CalibrationSection(Section):
     def most_samples(self) -> int:
         """Most kept iterations per chain: ``max_samples``, else 4 x ``samples``."""
         return 4 * self.samples if self.max_samples is None else self.max_samples
+
+    @property
+    def extends(self) -> bool:
+        """Whether failing chains may be extended past ``samples`` ('mwg' only)."""
+        return self.sampler == "mwg" and self.most_samples > self.samples

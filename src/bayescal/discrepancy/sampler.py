@@ -76,7 +76,7 @@ from bayescal.discrepancy.phase import DeltaPhase
 from bayescal.emulator.kernel import FloatArray
 from bayescal.errors import ConfigError
 from bayescal.mcmc.checkpoint import ChainCheckpoint
-from bayescal.mcmc.diagnostics import diagnose
+from bayescal.mcmc.diagnostics import diagnose, extended_length
 from bayescal.mcmc.samplers.lockstep import run_lockstep
 from bayescal.mcmc.samplers.mwg import MetropolisWithinGibbs
 from bayescal.mcmc.samplers.schedule import fingerprint
@@ -480,7 +480,7 @@ class _Loop:
         )
         n = draws.shape[1]
         if not state.converged:
-            state.next_check = min(s.max_draws, max(n + 1, math.ceil(n * s.growth)))
+            state.next_check = extended_length(n, s.max_draws, s.growth)
 
     # ---------------------------------------------------------------- snapshots
 

@@ -20,6 +20,7 @@ Fixed parameters (acceptance ``NaN`` in every chain) are reported but not judged
 
 from __future__ import annotations
 
+import math
 import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -35,6 +36,17 @@ from bayescal.mcmc.chains import Chains
 #: The thresholds :func:`diagnose` judges by default (Vehtari et al. 2021).
 RHAT_MAX = 1.01
 ESS_MIN = 400.0
+
+
+def extended_length(kept: int, most: int, growth: float = 1.5) -> int:
+    """The next length of chains that failed their diagnostics after ``kept`` draws:
+    ``growth`` times as long (at least one draw more), at most ``most``.
+
+    Shared by the calibration (:func:`bayescal.calibration.posterior.calibrate`) and
+    the difference-process phase, which both run until they converge.
+    """
+    return min(most, max(kept + 1, math.ceil(kept * growth)))
+
 
 if TYPE_CHECKING:
     import pandas as pd

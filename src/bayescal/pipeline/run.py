@@ -353,7 +353,7 @@ def _say_calibration_length(r: _Runner, post: Posterior) -> None:
     """How long the chains ran when [calibration] max_samples let them grow; loud when
     they still failed their diagnostics at that length."""
     cal = r.ctx.study.calibration
-    if cal.sampler != "mwg" or cal.most_samples == cal.samples:
+    if not cal.extends:
         return
     kept = post.draws.shape[1]
     if kept > cal.samples:

@@ -66,7 +66,7 @@ def delta_correlation(predictions: xr.Dataset) -> pd.DataFrame:
 def _calibration_longer(study: Study) -> str:
     """``", extended up to N until converged"`` where ``max_samples`` lets the chains grow."""
     cal = study.calibration
-    if cal.sampler != "mwg" or cal.most_samples == cal.samples:
+    if not cal.extends:
         return ""
     return f", extended up to {cal.most_samples} until converged"
 
