@@ -25,9 +25,33 @@ predictive distribution is right), ``band_scale`` (the outer band's spread over 
 errors' RMS: the band's half-width divided by the normal quantile of its level,
 median over the samples, over the RMSE; about 1 when the band's width matches the
 errors, above 1 when it is wider than the errors it should hold) and
-``guideline14`` (:func:`meets_guideline14`). :func:`band_notes` turns these
-into sentences where a band's width or the errors' shape explains a coverage
-off its rate.
+``guideline14`` (:func:`meets_guideline14`), and ``n_eff95`` and ``n_eff50``
+(:func:`coverage_n_eff`: how many independent samples the coverage of an honest
+band is worth on the window, fewer than ``n`` where the errors are
+autocorrelated). :func:`band_notes` turns these into sentences where a band's
+width or the errors' shape explains a coverage off its rate, and where a
+coverage off its rate is, or is not, within what one window gives an honest
+band (:func:`honest_range`).
+
+How much a coverage says
+------------------------
+A coverage is measured on one window, and on a time series the samples are
+not independent: an hour that falls outside the band is often followed by
+another. :func:`coverage_n_eff` asks what an honest band would show: its
+errors, standardised, are N(0, 1) with the autocorrelation ``r_k`` that the
+window's standardised errors have (estimated from the normal scores of their
+ranks, so that a few large errors do not set it; lags truncated by Geyer's
+initial positive sequence). Two samples ``k`` apart are then both
+inside the central band of level ``L`` (``c`` = the normal quantile of
+``(1 + L) / 2``) with probability ``1 - 4 T(c, a) - 4 T(c, 1 / a)``,
+``a = sqrt((1 - r_k) / (1 + r_k))`` and ``T`` Owen's T function (the
+bivariate normal's square), which gives the covariance ``C_k`` of their
+indicators; the variance of the coverage over ``n`` samples with ``n_k``
+pairs at lag ``k`` is ``(n L (1 - L) + 2 sum_k n_k C_k) / n²``, and
+``n_eff = L (1 - L) / variance`` (``n`` for independent samples).
+:func:`honest_range` is the central 95 % of a binomial share with ``n_eff``
+trials: the coverages an honest band shows on such a window 95 % of the
+time.
 
 Guideline 14 by resolution
 --------------------------
@@ -59,6 +83,7 @@ import numpy as np
 import numpy.typing as npt
 import pandas as pd
 from scipy import stats
+from scipy.special import owens_t
 
 __all__ = [
     "G14_CV_RMSE",
@@ -71,7 +96,9 @@ __all__ = [
     "MetricColumn",
     "Metrics",
     "band_notes",
+    "coverage_n_eff",
     "fit_metrics",
+    "honest_range",
     "meets_guideline14",
     "metric_columns",
     "monthly_metrics",
@@ -91,6 +118,9 @@ BAND_SCALE_OFF: Final = 1.25
 #: :func:`band_notes`: errors with a larger excess kurtosis are called heavy-tailed
 #: (Gaussian errors: 0, with a standard error of about sqrt(24 / n) for independent ones).
 HEAVY_TAILS: Final = 2.0
+#: :func:`band_notes`: a coverage this far from its band's rate (outer band, 50 % band)
+#: gets a note that says whether one window's chance explains it.
+OFF_RATE: Final = (0.02, 0.05)
 
 
 @dataclass(frozen=True)
@@ -315,6 +345,24 @@ METRIC_COLUMNS: Final = (
         scale=100.0,
     ),
     MetricColumn(
+        "n_eff95",
+        "neff95",
+        "independent samples (95 % band)",
+        "",
+        "how many independent samples the outer band's coverage is worth on this window: "
+        "the samples' count where the errors are uncorrelated, fewer where they are not "
+        "(an honest band covers honest_range(level, n_eff95) of them)",
+        digits=3,
+    ),
+    MetricColumn(
+        "n_eff50",
+        "neff50",
+        "independent samples (50 % band)",
+        "",
+        "the same for the 50 % band's coverage",
+        digits=3,
+    ),
+    MetricColumn(
         "pit_ks",
         "PIT KS",
         "PIT distance from uniform",
@@ -385,7 +433,15 @@ KEY_COLUMNS: Final = ("output", "model", "window")
 MODELS: Final = ("nominal", "calibrated", "calibrated+delta")
 
 _ERRORS = ("mse", "rmse", "mean_abs_error", "max_abs_error")
-_BANDS = ("coverage95", "coverage50", "pit_ks", "band_scale", "excess_kurtosis", "guideline14")
+_BANDS = (
+    "coverage95",
+    "coverage50",
+    "n_eff95",
+    "pit_ks",
+    "band_scale",
+    "excess_kurtosis",
+    "guideline14",
+)
 _MONTHLY = ("cv_rmse_monthly", "nmbe_monthly", "guideline14_monthly")
 _TABLES: dict[str, tuple[str, ...]] = {
     "csv": tuple(c.name for c in METRIC_COLUMNS),
@@ -417,6 +473,83 @@ def metric_columns(table: Table = "csv") -> tuple[MetricColumn, ...]:
     """
     by_name = {c.name: c for c in METRIC_COLUMNS}
     return tuple(by_name[name] for name in _TABLES[table])
+
+
+def coverage_n_eff(
+    z: npt.ArrayLike, positions: npt.ArrayLike | None = None, *, level: float = 0.95
+) -> float:
+    """How many independent samples the coverage of an honest central band is worth.
+
+    See the module notes ("How much a coverage says") for the formula.
+
+    Parameters
+    ----------
+    z
+        The errors standardised by the band (prediction minus measurement over
+        the band's spread; any common scale: only their correlation enters),
+        shape ``(n,)``; non-finite values are left out.
+    positions
+        Integer places of the samples on the study clock, shape ``(n,)``,
+        increasing: samples ``k`` places apart are pairs at lag ``k`` (a window
+        of several periods has gaps); default ``0, 1, ..., n - 1``.
+    level
+        Probability of the central band, in (0, 1). [-]
+
+    Returns
+    -------
+    float
+        ``n_eff`` in ``[1, n]`` (``n`` for fewer than 3 samples or constant errors).
+    """
+    if not 0.0 < level < 1.0:
+        raise ValueError(f"level must lie in (0, 1), got {level}")
+    values = np.asarray(z, dtype=float).ravel()
+    place = np.arange(values.size) if positions is None else np.asarray(positions).ravel()
+    keep = np.isfinite(values)
+    values, place = values[keep], place[keep].astype(np.int64)
+    n = values.size
+    if n < 3 or np.ptp(values) == 0.0:
+        return float(n)
+    # normal scores of the ranks: the honest band's N(0, 1) errors, robust to a few
+    # large ones (whose products would otherwise set every autocorrelation)
+    x = stats.norm.ppf(stats.rankdata(values) / (n + 1.0))
+    var = float(np.mean(x * x))
+    span = int(place.max() - place.min()) + 1
+    full, there = np.zeros(span), np.zeros(span)
+    full[place - place.min()], there[place - place.min()] = x, 1.0
+    size = 1 << int(np.ceil(np.log2(2 * span)))
+    fx, fm = np.fft.rfft(full, size), np.fft.rfft(there, size)
+    acov = np.fft.irfft(fx * np.conj(fx), size)[:span]
+    pairs = np.rint(np.fft.irfft(fm * np.conj(fm), size)[:span])
+    lags = np.arange(1, min(span, n // 2 + 1))
+    lags = lags[pairs[lags] > 0]
+    r = acov[lags] / (pairs[lags] * var)
+    # Geyer's initial positive sequence: lags up to the first pair (r_2m + r_2m+1) <= 0
+    rho = np.concatenate(([1.0], r))
+    sums = rho[0 : rho.size - 1 : 2] + rho[1::2]
+    stop = int(np.argmax(sums <= 0.0)) if np.any(sums <= 0.0) else sums.size
+    used = slice(0, max(2 * stop - 1, 0))
+    c = float(stats.norm.ppf(0.5 + 0.5 * level))
+    rk = np.clip(r[used], -1.0 + 1e-12, 1.0 - 1e-12)
+    a = np.sqrt((1.0 - rk) / (1.0 + rk))
+    both = 1.0 - 4.0 * owens_t(c, a) - 4.0 * owens_t(c, 1.0 / a)
+    cov = np.maximum(both - level * level, 0.0)
+    single = level * (1.0 - level)
+    variance = (n * single + 2.0 * float(np.sum(pairs[lags][used] * cov))) / n**2
+    return float(np.clip(single / variance, 1.0, n))
+
+
+def honest_range(level: float, n_eff: float, *, probability: float = 0.95) -> tuple[float, float]:
+    """The coverages an honest band of ``level`` shows on a window worth ``n_eff``
+    independent samples, ``probability`` of the time.
+
+    The central ``probability`` of a binomial share with ``round(n_eff)`` trials
+    (at least 1) and success probability ``level``.
+    """
+    m = max(1, round(n_eff))
+    tail = 0.5 * (1.0 - probability)
+    low = float(stats.binom.ppf(tail, m, level)) / m
+    high = float(stats.binom.ppf(1.0 - tail, m, level)) / m
+    return low, high
 
 
 def band_notes(metrics: pd.DataFrame, *, level: float = 0.95) -> list[str]:
@@ -462,5 +595,37 @@ def band_notes(metrics: pd.DataFrame, *, level: float = 0.95) -> list[str]:
                 "few large errors set the spread of the Gaussian band, and its middle half "
                 f"holds {float(row['coverage50']):.3f} of them; an error model with heavier "
                 "tails, or the cause of the large errors, is what would narrow it."
+            )
+        notes += _chance_notes(row, where, level)
+    return notes
+
+
+def _chance_notes(row: pd.Series, where: str, level: float) -> list[str]:
+    """Notes on coverages more than :data:`OFF_RATE` from their rate: within or outside
+    what one window gives an honest band (:func:`honest_range`)."""
+    notes = []
+    bands = (
+        ("coverage95", "n_eff95", level, OFF_RATE[0]),
+        ("coverage50", "n_eff50", 0.5, OFF_RATE[1]),
+    )
+    for column, count, rate, off in bands:
+        cover, n_eff = float(row.get(column, np.nan)), float(row.get(count, np.nan))
+        if not (np.isfinite(cover) and np.isfinite(n_eff)):
+            continue
+        low, high = honest_range(rate, n_eff)
+        name = f"{100 * rate:g} %"
+        samples = f"about {n_eff:.0f} independent samples of {int(row['n'])}"
+        if low <= cover <= high and abs(cover - rate) > off:
+            notes.append(
+                f"{where}: the {name} band covers {cover:.3f}, within {low:.2f}-{high:.2f}, what "
+                f"an honest band covers 95 % of the time on a window of {samples}: this "
+                "window cannot tell the band from an honest one."
+            )
+        elif not low <= cover <= high:
+            side = "too wide" if cover > high else "too narrow"
+            notes.append(
+                f"{where}: the {name} band covers {cover:.3f}, outside {low:.2f}-{high:.2f}, "
+                f"what an honest band covers 95 % of the time on a window of {samples}: "
+                f"the band is {side} for these errors."
             )
     return notes
