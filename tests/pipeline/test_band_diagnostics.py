@@ -17,6 +17,7 @@ import pytest
 import xarray as xr
 from scipy.stats import kurtosis, norm
 
+from band_data import band_dataset
 from bayescal.metrics import band_notes, fit_metrics
 from bayescal.pipeline.predict import metrics_table
 
@@ -25,22 +26,7 @@ N = 20_000
 
 def _dataset(errors: np.ndarray, band_sd: float, level: float = 0.95) -> xr.Dataset:
     """A training window of ``N`` samples: truth 0, measured = errors, Gaussian bands."""
-    n = errors.size
-    zero = np.zeros(n)
-    z95, z50 = norm.ppf(0.5 + 0.5 * level), norm.ppf(0.75)
-    series = {
-        "measured": errors,
-        "nominal": zero + 1.0,
-        "calibrated": zero,
-        "calibrated_lower": zero - z95 * band_sd,
-        "calibrated_upper": zero + z95 * band_sd,
-        "calibrated_lower50": zero - z50 * band_sd,
-        "calibrated_upper50": zero + z50 * band_sd,
-    }
-    data = {f"y_{k}": ("time", v) for k, v in series.items()}
-    times = pd.date_range("2013-03-01", periods=n, freq="10min").values
-    coords = {"time": times, "window": ("time", np.full(n, "train"))}
-    return xr.Dataset(data, coords=coords, attrs={"outputs": "y", "level": level})
+    return band_dataset(errors, band_sd, level=level)
 
 
 def _calibrated(ds: xr.Dataset) -> pd.Series:

@@ -10,13 +10,13 @@ band, whose coverage on each replicate window is one draw of what the range prom
 from __future__ import annotations
 
 import numpy as np
-import pandas as pd
 import pytest
 import xarray as xr
 from scipy.signal import lfilter
 from scipy.special import owens_t
 from scipy.stats import binom, multivariate_normal, norm, rankdata
 
+from band_data import band_dataset
 from bayescal.metrics import band_notes, coverage_n_eff, honest_range
 from bayescal.pipeline.predict import metrics_table
 
@@ -127,23 +127,8 @@ def test_a_band_too_wide_falls_outside_the_range() -> None:
 
 
 def _dataset(errors: np.ndarray, band_sd: float) -> xr.Dataset:
-    n = errors.size
-    zero = np.zeros(n)
-    z95, z50 = norm.ppf(0.975), norm.ppf(0.75)
-    series = {
-        "measured": errors,
-        "nominal": zero + 1.0,
-        "calibrated": zero,
-        "calibrated_lower": zero - z95 * band_sd,
-        "calibrated_upper": zero + z95 * band_sd,
-        "calibrated_lower50": zero - z50 * band_sd,
-        "calibrated_upper50": zero + z50 * band_sd,
-    }
-    data = {f"y_{k}": ("time", v) for k, v in series.items()}
-    times = pd.date_range("2013-03-01", periods=n, freq="30min").values
-    window = np.where(np.arange(n) < n - 336, "train", "test")
-    coords = {"time": times, "window": ("time", window)}
-    return xr.Dataset(data, coords=coords, attrs={"outputs": "y", "level": 0.95})
+    """Half-hours; the last week (336) is the test window."""
+    return band_dataset(errors, band_sd, freq="30min", test=336)
 
 
 def test_metrics_carry_n_eff_and_the_notes_read_it() -> None:
