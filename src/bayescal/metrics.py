@@ -76,6 +76,7 @@ metric means adding it here (and computing it).
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass
 from typing import Final, Literal
 
@@ -97,6 +98,7 @@ __all__ = [
     "Metrics",
     "band_notes",
     "coverage_n_eff",
+    "coverage_n_effs",
     "fit_metrics",
     "honest_range",
     "meets_guideline14",
@@ -500,15 +502,33 @@ def coverage_n_eff(
     float
         ``n_eff`` in ``[1, n]`` (``n`` for fewer than 3 samples or constant errors).
     """
-    if not 0.0 < level < 1.0:
-        raise ValueError(f"level must lie in (0, 1), got {level}")
+    return coverage_n_effs(z, positions, levels=(level,))[0]
+
+
+def coverage_n_effs(
+    z: npt.ArrayLike, positions: npt.ArrayLike | None = None, *, levels: Sequence[float]
+) -> tuple[float, ...]:
+    """:func:`coverage_n_eff` for several band levels, the errors' autocorrelation
+    estimated once."""
+    for level in levels:
+        if not 0.0 < level < 1.0:
+            raise ValueError(f"level must lie in (0, 1), got {level}")
     values = np.asarray(z, dtype=float).ravel()
     place = np.arange(values.size) if positions is None else np.asarray(positions).ravel()
     keep = np.isfinite(values)
     values, place = values[keep], place[keep].astype(np.int64)
     n = values.size
     if n < 3 or np.ptp(values) == 0.0:
-        return float(n)
+        return tuple(float(n) for _ in levels)
+    pairs, r = _lag_correlations(values, place)
+    return tuple(_n_eff(n, pairs, r, level) for level in levels)
+
+
+def _lag_correlations(
+    values: npt.NDArray[np.float64], place: npt.NDArray[np.int64]
+) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+    """Pair counts and autocorrelations of the lags up to Geyer's cut (module notes)."""
+    n = values.size
     # normal scores of the ranks: the honest band's N(0, 1) errors, robust to a few
     # large ones (whose products would otherwise set every autocorrelation)
     x = stats.norm.ppf(stats.rankdata(values) / (n + 1.0))
@@ -528,13 +548,20 @@ def coverage_n_eff(
     sums = rho[0 : rho.size - 1 : 2] + rho[1::2]
     stop = int(np.argmax(sums <= 0.0)) if np.any(sums <= 0.0) else sums.size
     used = slice(0, max(2 * stop - 1, 0))
+    return pairs[lags][used], r[used]
+
+
+def _n_eff(
+    n: int, pairs: npt.NDArray[np.float64], r: npt.NDArray[np.float64], level: float
+) -> float:
+    """``L (1 - L) / var(coverage)`` of the band of ``level`` (module notes)."""
     c = float(stats.norm.ppf(0.5 + 0.5 * level))
-    rk = np.clip(r[used], -1.0 + 1e-12, 1.0 - 1e-12)
+    rk = np.clip(r, -1.0 + 1e-12, 1.0 - 1e-12)
     a = np.sqrt((1.0 - rk) / (1.0 + rk))
     both = 1.0 - 4.0 * owens_t(c, a) - 4.0 * owens_t(c, 1.0 / a)
     cov = np.maximum(both - level * level, 0.0)
     single = level * (1.0 - level)
-    variance = (n * single + 2.0 * float(np.sum(pairs[lags][used] * cov))) / n**2
+    variance = (n * single + 2.0 * float(np.sum(pairs * cov))) / n**2
     return float(np.clip(single / variance, 1.0, n))
 
 

@@ -73,7 +73,7 @@ from bayescal.glossary import GLOSSARY
 from bayescal.metrics import (
     KEY_COLUMNS,
     MODELS,
-    coverage_n_eff,
+    coverage_n_effs,
     fit_metrics,
     meets_guideline14,
     metric_columns,
@@ -743,9 +743,9 @@ def _band_scores(
         width = (ds[f"{prefix}_upper"] - ds[f"{prefix}_lower"]).values[ok]
         with np.errstate(divide="ignore", invalid="ignore"):  # a zero-width band: left out
             z = (ds[prefix].values[ok] - obs[ok]) / width
-        out["n_eff95"] = coverage_n_eff(z, np.flatnonzero(ok), level=level)
-        if "coverage50" in out:
-            out["n_eff50"] = coverage_n_eff(z, np.flatnonzero(ok), level=0.5)
+        names = ("n_eff95", "n_eff50") if "coverage50" in out else ("n_eff95",)
+        levels = (level, 0.5)[: len(names)]
+        out |= dict(zip(names, coverage_n_effs(z, np.flatnonzero(ok), levels=levels), strict=True))
         half = 0.5 * (ds[f"{prefix}_upper"].values[ok] - ds[f"{prefix}_lower"].values[ok])
         spread = float(np.median(half)) / float(norm.ppf(0.5 + 0.5 * level))
         out["band_scale"] = spread / rmse if rmse > 0 else float("nan")
