@@ -18,7 +18,9 @@ against the binomial bound (the smallest count that 95 % intervals reach with
 probability 0.99). ``--keep`` keeps the study folders; the table is also written
 to ``box_truths_<mode>.csv`` in ``--out``, after every truth: a run stopped and
 started again with the same ``--truths`` keeps the truths it finished
-(``--fresh`` redoes them).
+(``--fresh`` redoes them). ``--discrepancy`` replaces the example's in-likelihood
+discrepancy (``[outputs.errors.<output>] discrepancy``) to see what it does to the
+intervals; the table is then ``box_truths_<mode>_<kind>.csv``.
 
 Run (each truth is about one minute on the idle 2-core machine)::
 
@@ -33,6 +35,7 @@ for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")
 
 import argparse  # noqa: E402
+import re  # noqa: E402
 import shutil  # noqa: E402
 import sys  # noqa: E402
 import time  # noqa: E402
@@ -71,11 +74,44 @@ def truths(n: int, seed: int = SEED) -> list[dict[str, float]]:
     ]
 
 
-def one_truth(mode: str, index: int, values: dict[str, float], folder: Path) -> dict[str, object]:
-    """Make the data at ``values``, run the example's study, score its intervals and bands."""
+#: ``--discrepancy`` choices and the TOML value each writes.
+DISCREPANCY = {
+    "none": "false",
+    "conditions": '"conditions"',
+    "independent": '"independent"',
+    "both": '"both"',
+}
+
+
+def set_discrepancy(study: Path, kind: str) -> None:
+    """Replace the one ``discrepancy = ...`` line of the example's ``study`` file by
+    ``kind`` (a key of :data:`DISCREPANCY`)."""
+    text, count = re.subn(
+        r"^discrepancy = .*$",
+        f"discrepancy = {DISCREPANCY[kind]}",
+        study.read_text(encoding="utf-8"),
+        flags=re.M,
+    )
+    if count != 1:
+        raise RuntimeError(f"{study}: expected one 'discrepancy = ' line, found {count}")
+    study.write_text(text, encoding="utf-8")
+
+
+def one_truth(
+    mode: str,
+    index: int,
+    values: dict[str, float],
+    folder: Path,
+    discrepancy: str | None = None,
+) -> dict[str, object]:
+    """Make the data at ``values``, run the example's study (its in-likelihood
+    discrepancy replaced by ``discrepancy``, one of :data:`DISCREPANCY`, if given),
+    score its intervals and bands."""
     name = f"box-{mode}"
     shutil.rmtree(folder, ignore_errors=True)
     copy_example(name, folder)
+    if discrepancy is not None:
+        set_discrepancy(folder / "study.toml", discrepancy)
     table = box.make_phase(mode, np.random.default_rng(SEED + index), values)
     table.to_parquet(folder / "data" / f"{name}.parquet", index=False, compression="zstd")
     start = time.perf_counter()
@@ -132,9 +168,15 @@ def main() -> None:
     parser.add_argument("--out", type=Path, default=Path("box_truths"))
     parser.add_argument("--keep", action="store_true", help="keep every truth's study folder")
     parser.add_argument("--fresh", action="store_true", help="redo truths already in the CSV")
+    parser.add_argument(
+        "--discrepancy",
+        choices=tuple(DISCREPANCY),
+        help="replace the example's in-likelihood discrepancy (default: the example's own)",
+    )
     args = parser.parse_args()
     args.out.mkdir(parents=True, exist_ok=True)
-    csv = args.out / f"box_truths_{args.mode}.csv"
+    suffix = f"_{args.discrepancy}" if args.discrepancy else ""
+    csv = args.out / f"box_truths_{args.mode}{suffix}.csv"
     drawn = truths(args.truths)
     rows = [] if args.fresh else finished(csv, drawn)
     if rows:
@@ -142,8 +184,8 @@ def main() -> None:
     for i, values in enumerate(drawn):
         if i < len(rows):
             continue
-        folder = args.out / f"{args.mode}-{i}"
-        rows.append(one_truth(args.mode, i, values, folder))
+        folder = args.out / f"{args.mode}{suffix}-{i}"
+        rows.append(one_truth(args.mode, i, values, folder, args.discrepancy))
         print(f"truth {i}: " + ", ".join(f"{k}={v}" for k, v in rows[-1].items()), flush=True)
         if not args.keep:
             shutil.rmtree(folder, ignore_errors=True)

@@ -41,3 +41,21 @@ def test_a_stopped_run_keeps_the_truths_it_finished(tmp_path: Path) -> None:
     # other truths (another count, hence another hypercube) are not kept
     assert box_truths.finished(csv, box_truths.truths(5)) == []
     assert box_truths.finished(tmp_path / "none.csv", drawn) == []
+
+
+def test_the_discrepancy_can_be_replaced_in_both_examples(tmp_path: Path) -> None:
+    from bayescal.config import load_study
+    from bayescal.examples import copy_example
+
+    for mode, output in (("coheating", "heating_power"), ("freefloat", "temp_air_in")):
+        for kind, expected in (
+            ("none", False),
+            ("conditions", "conditions"),
+            ("independent", "independent"),
+            ("both", "both"),
+        ):
+            folder = tmp_path / f"{mode}-{kind}"
+            copy_example(f"box-{mode}", folder)
+            box_truths.set_discrepancy(folder / "study.toml", kind)
+            study = load_study(folder)
+            assert study.outputs.errors[output].discrepancy == expected
