@@ -36,7 +36,8 @@ class CalibrationSection(Section):
         "'gibbs': each coordinate moves alone, then the parameters jointly, every sweep. "
         "'joint': from mid burn-in the parameters, lambda* and AR(1) phi move only together "
         "(covariance learnt from them; proposals screened by a stand-in: delayed acceptance)"
-        ": Twin House 7-8x the ESS per evaluation, fewer evaluations; office worse: check.",
+        ": Twin House 7-8x the ESS per evaluation; a large block (office) needs a long "
+        "burn-in. Check the diagnostics.",
         "joint",
         default="gibbs",
     )
