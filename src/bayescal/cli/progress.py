@@ -100,6 +100,10 @@ def study_summary(study: Any, measured: Any) -> str:
                 "and the periods the gaps touch are dropped; data.max_gap_interpolate = "
                 f"'{longest}' interpolates them instead and keeps the periods"
             )
+    excluded = getattr(measured, "excluded", ())
+    if excluded:
+        lines.append(f"excluded (data.exclude): {len(excluded)} window(s)")
+        lines += [f"  {window.describe()}" for window in excluded]
     return "\n".join(lines)
 
 

@@ -24,6 +24,7 @@ from bayescal.config.base import (
     field_doc,
     raise_problems,
     resolve_path,
+    suggestion,
 )
 from bayescal.errors import DataError
 from bayescal.glossary import GLOSSARY, glossary_quantity
@@ -78,6 +79,29 @@ class ColumnSpec(Section):
         if isinstance(value, bool) or not isinstance(value, str | int):
             raise ValueError(f"expected a column name or an integer index, got {value!r}")
         return value
+
+
+class ExcludeWindow(Section):
+    """One ``[[data.exclude]]`` window: samples of the file that are not measurements."""
+
+    start: Instant = field_doc(
+        "First instant excluded (local time of the data, as data.start).",
+        "2013-09-06T05:55:00",
+    )
+    end: Instant = field_doc(
+        "End of the window, exclusive.",
+        "2013-09-06T06:05:00",
+    )
+    columns: list[str] = field_doc(
+        "Glossary names of the columns excluded (names of [data.columns]); empty: every column.",
+        ["heat_flux_in", "temp_surf_in"],
+        default_factory=list,
+    )
+    reason: str = field_doc(
+        "Why, for the run's summary and the record.",
+        "sun patch on the heat-flux plate",
+        default="",
+    )
 
 
 class DataSection(Section):
@@ -148,6 +172,16 @@ class DataSection(Section):
     )
     end: Instant | None = field_doc(
         "End of the record, exclusive.", "2013-09-30T00:00:00", default=None
+    )
+    exclude: list[ExcludeWindow] = field_doc(
+        "Time windows whose samples are not measurements (a sensor event, a visit, a "
+        "sun patch on a plate): their values in the file are treated as missing before "
+        "the data are brought to the clock, so a clock value averaged from finer data "
+        "keeps its other samples (if at least half of its window is left) and a value on "
+        "the clock becomes a gap (data.max_gap_interpolate). Decide them from the "
+        "records, not from a fit to the test window.",
+        [{"start": "2013-09-06T05:55:00", "end": "2013-09-06T06:05:00"}],
+        default_factory=list,
     )
     columns: dict[str, ColumnSpec] = field_doc(
         "Glossary name -> file column. Outputs in [outputs].calibrate are measurements, "
@@ -221,6 +255,16 @@ class DataSection(Section):
             problems.append("data.time_zone: EPW files carry their own time zone; remove it")
         if self.start and self.end and _utc(self.start, self.zone) >= _utc(self.end, self.zone):
             problems.append(f"data.end: {self.end} is not after data.start {self.start}")
+        for i, window in enumerate(self.exclude):
+            key = f"data.exclude[{i}]"
+            if _utc(window.start, self.zone) >= _utc(window.end, self.zone):
+                problems.append(f"{key}.end: {window.end} is not after its start {window.start}")
+            for name in window.columns:
+                if name not in self.columns:
+                    problems.append(
+                        f"{key}.columns: {name!r} is not a column of [data.columns]"
+                        + suggestion(name, list(self.columns))
+                    )
         if self.delimiter == self.decimal:
             problems.append(f"data.decimal: {self.decimal!r} is also the delimiter")
         return problems

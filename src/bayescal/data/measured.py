@@ -3,7 +3,8 @@
 :func:`load_measured` turns ``[data]`` of a validated study into
 :class:`MeasuredData`: the boundary conditions as a
 :class:`~bayescal.simulators.base.Forcing` on the study clock, the measured
-outputs to calibrate on, the clock and the list of gaps. Columns listed in
+outputs to calibrate on, the clock, the list of gaps and the windows excluded
+(``[[data.exclude]]``). Columns listed in
 ``[outputs].calibrate`` are outputs, those in ``[outputs].held_out`` held-out
 outputs; every other mapped column is a boundary condition.
 """
@@ -41,6 +42,39 @@ if TYPE_CHECKING:
 
 
 @dataclass(frozen=True)
+class Excluded:
+    """One ``[[data.exclude]]`` window as applied to the file.
+
+    Attributes
+    ----------
+    start, end
+        The window, local time of the data (end exclusive).
+    columns
+        Glossary names of the columns whose values were removed.
+    values
+        Finite values of the file set missing.
+    reason
+        The study's reason, if it gave one.
+    """
+
+    start: pd.Timestamp
+    end: pd.Timestamp
+    columns: tuple[str, ...]
+    values: int
+    reason: str = ""
+
+    def describe(self) -> str:
+        """``2013-09-06 05:55 to 06:05 local: 2 values of heat_flux_in (sun patch)``."""
+        same_day = self.start.date() == self.end.date()
+        end = self.end.strftime("%H:%M" if same_day else "%Y-%m-%d %H:%M")
+        why = f" ({self.reason})" if self.reason else ""
+        return (
+            f"{self.start:%Y-%m-%d %H:%M} to {end} local: {self.values} value(s) of "
+            f"{', '.join(self.columns)}{why}"
+        )
+
+
+@dataclass(frozen=True)
 class MeasuredData:
     """Measured series of a study on its clock, in internal units.
 
@@ -66,6 +100,8 @@ class MeasuredData:
         (``[outputs] held_out``), NaN where missing.
     zone
         The zone of the file's local times (messages show times in it).
+    excluded
+        The ``[[data.exclude]]`` windows, with the values each removed.
     """
 
     forcing: Forcing
@@ -77,6 +113,7 @@ class MeasuredData:
     source: Path
     zone: tzinfo = UTC
     held_out: Mapping[str, np.ndarray] = field(default_factory=dict)
+    excluded: tuple[Excluded, ...] = ()
 
     @property
     def n(self) -> int:
@@ -163,6 +200,36 @@ def _check_plausible(name: str, spec: ColumnSpec, values: np.ndarray, source: st
         hint=f"check the unit and scale of data.columns.{name} (file column {spec.source!r})",
         source=source,
     )
+
+
+def _exclude(
+    frame: pd.DataFrame, data: DataSection, zone: tzinfo
+) -> tuple[pd.DataFrame, tuple[Excluded, ...]]:
+    """``frame`` (UTC index, glossary columns) with the ``[[data.exclude]]`` windows
+    set missing, and what each window removed."""
+    if not data.exclude:
+        return frame, ()
+    frame = frame.copy()
+    index = pd.DatetimeIndex(frame.index)
+    done = []
+    for i, window in enumerate(data.exclude):
+        start, end = pd.Timestamp(window.start), pd.Timestamp(window.end)
+        lo = start if start.tz is not None else start.tz_localize(zone)
+        hi = end if end.tz is not None else end.tz_localize(zone)
+        rows = (index >= lo.tz_convert("UTC")) & (index < hi.tz_convert("UTC"))
+        if not rows.any():
+            raise DataError(
+                f"data.exclude[{i}]: no row of the file lies in [{window.start}, {window.end})",
+                hint=f"the file runs from {index[0].tz_convert(zone):%Y-%m-%d %H:%M} to "
+                f"{index[-1].tz_convert(zone):%Y-%m-%d %H:%M} local time; check the window's "
+                "date and data.time_zone",
+                source=str(data.file),
+            )
+        columns = list(window.columns) or list(frame.columns)
+        values = int(np.isfinite(frame.loc[rows, columns].to_numpy(dtype=float)).sum())
+        frame.loc[rows, columns] = np.nan
+        done.append(Excluded(start, end, tuple(columns), values, window.reason))
+    return frame, tuple(done)
 
 
 def _convert(raw: pd.DataFrame, data: DataSection) -> pd.DataFrame:
@@ -348,7 +415,7 @@ def load_measured(study: Study) -> MeasuredData:
     raw, zone = _read(data, sources)
     labels = raw.attrs.get("rows")
     step = pd.Timedelta(data.step)
-    converted = _convert(raw, data)
+    converted, excluded = _exclude(_convert(raw, data), data, zone)
     frame = align(
         converted,
         step,
@@ -393,4 +460,5 @@ def load_measured(study: Study) -> MeasuredData:
         Path(source),
         zone,
         held_out,
+        excluded,
     )
