@@ -51,6 +51,7 @@ samples = 150
 [calibration]
 chains = 4
 sampler = "mwg"
+moves = "joint"  # as the example
 burn = 400
 samples = 400
 max_samples = 400  # the reduced size as it is: no extension
@@ -131,13 +132,21 @@ def _column(table: pd.DataFrame, name: str) -> dict[str, float]:
 
 @pytest.mark.slow
 @pytest.mark.shared_data
-def test_calibration_beats_the_catalogue_wall_on_both_windows(results: Results) -> None:
-    # The nominal wall reaches about 0.45 W/m² on the training days (0.28 on the
-    # held-out week); the full-size run gains 59 % and 6 % (docs/case-studies.md).
-    for window in ("train", "test"):
-        nominal = _metric(results, "nominal", window)
-        assert _metric(results, "calibrated", window) < 0.95 * nominal, window
-    assert _metric(results, "nominal", "train") == pytest.approx(0.447, abs=0.01)
+def test_calibration_beats_the_catalogue_wall_on_the_training_days_and_its_band_holds_the_test_week(
+    results: Results,
+) -> None:
+    # The nominal wall reaches about 0.44 W/m² on the training days (0.28 on the
+    # held-out week). Since the three 06:00 events are excluded (2026-11-28) the
+    # full-size run gains 60 % on the training days and is 10 % worse than the catalogue
+    # on the held-out week (the discrepancy, extrapolated to its conditions, adds a
+    # bias), where its 95 % band holds 0.982 of the half-hours (docs/case-studies.md).
+    # Issue 15 asks for the test week's RMSE to be reported against the catalogue's and
+    # for its 95 % band to cover 0.90-0.99 of it: never confidently wrong.
+    nominal = _metric(results, "nominal", "train")
+    assert _metric(results, "calibrated", "train") < 0.95 * nominal
+    assert nominal == pytest.approx(0.4385, abs=0.005)
+    assert np.isfinite(_metric(results, "calibrated", "test"))
+    assert 0.90 <= _metric(results, "calibrated", "test", "coverage95") <= 0.99
 
 
 @pytest.mark.slow
