@@ -53,6 +53,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from datetime import timedelta, timezone, tzinfo
+from typing import overload
 
 import numpy as np
 import pandas as pd
@@ -283,7 +284,12 @@ def _midnight_origin(first: pd.Timestamp, zone: tzinfo) -> pd.Timestamp:
     return midnight.tz_convert("UTC")
 
 
-def _to_utc(value: pd.Timestamp | None, zone: tzinfo) -> pd.Timestamp | None:
+@overload
+def to_utc(value: pd.Timestamp, zone: tzinfo) -> pd.Timestamp: ...
+@overload
+def to_utc(value: None, zone: tzinfo) -> None: ...
+def to_utc(value: pd.Timestamp | None, zone: tzinfo) -> pd.Timestamp | None:
+    """``value`` in UTC; a naive one is a local time of ``zone``."""
     if value is None:
         return None
     ts = pd.Timestamp(value)
@@ -348,7 +354,7 @@ def align(
         )
     margin = 0 if linear else (ns - data_step.value) // 2  # half a window beyond the samples
     lo, hi = t[0] + margin, t[-1] - margin
-    start_utc, end_utc = _to_utc(start, zone), _to_utc(end, zone)
+    start_utc, end_utc = to_utc(start, zone), to_utc(end, zone)
     origin = start_utc if start_utc is not None else _midnight_origin(index[0], zone)
     if start_utc is not None and start_utc.value < lo:
         first_row = f"; {labels.row(0)} is the first row" if labels is not None else ""

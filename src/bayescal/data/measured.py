@@ -22,7 +22,7 @@ import numpy as np
 import pandas as pd
 
 from bayescal.clock import format_duration
-from bayescal.data.align import Gap, RowLabels, align, fill_gaps
+from bayescal.data.align import Gap, RowLabels, align, fill_gaps, to_utc
 from bayescal.data.meters import replace_interval_columns
 from bayescal.data.readers import (
     epw_field,
@@ -214,9 +214,7 @@ def _exclude(
     done = []
     for i, window in enumerate(data.exclude):
         start, end = pd.Timestamp(window.start), pd.Timestamp(window.end)
-        lo = start if start.tz is not None else start.tz_localize(zone)
-        hi = end if end.tz is not None else end.tz_localize(zone)
-        rows = (index >= lo.tz_convert("UTC")) & (index < hi.tz_convert("UTC"))
+        rows = (index >= to_utc(start, zone)) & (index < to_utc(end, zone))
         if not rows.any():
             raise DataError(
                 f"data.exclude[{i}]: no row of the file lies in [{window.start}, {window.end})",
