@@ -20,7 +20,10 @@ to ``box_truths_<mode>.csv`` in ``--out``, after every truth: a run stopped and
 started again with the same ``--truths`` keeps the truths it finished
 (``--fresh`` redoes them). ``--discrepancy`` replaces the example's in-likelihood
 discrepancy (``[outputs.errors.<output>] discrepancy``) to see what it does to the
-intervals; the table is then ``box_truths_<mode>_<kind>.csv``.
+intervals; the table is then ``box_truths_<mode>_<kind>.csv``. ``--layers`` runs the
+built-in box with ``window_model = "layers"`` and the Perez sky (the pair nearest
+EnergyPlus, tests/simulators/test_energyplus_box.py) instead of the paper's window;
+its table ends in ``_layers``.
 
 Run (each truth is about one minute on the idle 2-core machine)::
 
@@ -97,12 +100,27 @@ def set_discrepancy(study: Path, kind: str) -> None:
     study.write_text(text, encoding="utf-8")
 
 
+#: ``[simulator]`` settings of ``--layers``.
+LAYERS = {"window_model": '"layers"', "sky_model": '"perez"'}
+
+
+def set_simulator(study: Path, settings: dict[str, str]) -> None:
+    """Add ``settings`` (key -> TOML value) to the ``[simulator]`` table of ``study``."""
+    text = study.read_text(encoding="utf-8")
+    lines = "".join(f"{k} = {v}\n" for k, v in settings.items())
+    text, count = re.subn(r"^\[simulator\]\n", lambda m: m.group(0) + lines, text, flags=re.M)
+    if count != 1:
+        raise RuntimeError(f"{study}: expected one [simulator] table, found {count}")
+    study.write_text(text, encoding="utf-8")
+
+
 def one_truth(
     mode: str,
     index: int,
     values: dict[str, float],
     folder: Path,
     discrepancy: str | None = None,
+    simulator: dict[str, str] | None = None,
 ) -> dict[str, object]:
     """Make the data at ``values``, run the example's study (its in-likelihood
     discrepancy replaced by ``discrepancy``, one of :data:`DISCREPANCY`, if given),
@@ -112,6 +130,8 @@ def one_truth(
     copy_example(name, folder)
     if discrepancy is not None:
         set_discrepancy(folder / "study.toml", discrepancy)
+    if simulator:
+        set_simulator(folder / "study.toml", simulator)
     table = box.make_phase(mode, np.random.default_rng(SEED + index), values)
     table.to_parquet(folder / "data" / f"{name}.parquet", index=False, compression="zstd")
     start = time.perf_counter()
@@ -173,9 +193,16 @@ def main() -> None:
         choices=tuple(DISCREPANCY),
         help="replace the example's in-likelihood discrepancy (default: the example's own)",
     )
+    parser.add_argument(
+        "--layers",
+        action="store_true",
+        help='the built-in box with window_model = "layers" and the Perez sky',
+    )
     args = parser.parse_args()
     args.out.mkdir(parents=True, exist_ok=True)
-    suffix = f"_{args.discrepancy}" if args.discrepancy else ""
+    suffix = (f"_{args.discrepancy}" if args.discrepancy else "") + (
+        "_layers" if args.layers else ""
+    )
     csv = args.out / f"box_truths_{args.mode}{suffix}.csv"
     drawn = truths(args.truths)
     rows = [] if args.fresh else finished(csv, drawn)
@@ -185,7 +212,11 @@ def main() -> None:
         if i < len(rows):
             continue
         folder = args.out / f"{args.mode}{suffix}-{i}"
-        rows.append(one_truth(args.mode, i, values, folder, args.discrepancy))
+        rows.append(
+            one_truth(
+                args.mode, i, values, folder, args.discrepancy, LAYERS if args.layers else None
+            )
+        )
         print(f"truth {i}: " + ", ".join(f"{k}={v}" for k, v in rows[-1].items()), flush=True)
         if not args.keep:
             shutil.rmtree(folder, ignore_errors=True)

@@ -59,3 +59,18 @@ def test_the_discrepancy_can_be_replaced_in_both_examples(tmp_path: Path) -> Non
             box_truths.set_discrepancy(folder / "study.toml", kind)
             study = load_study(folder)
             assert study.outputs.errors[output].discrepancy == expected
+
+
+def test_layers_reach_both_examples(tmp_path: Path) -> None:
+    from bayescal.config import load_study
+    from bayescal.config.simulators import BoxSimulator
+    from bayescal.examples import copy_example
+
+    for mode in ("coheating", "freefloat"):
+        folder = tmp_path / mode
+        copy_example(f"box-{mode}", folder)
+        assert load_study(folder).simulator.window_model == "transmittance"  # type: ignore[union-attr]
+        box_truths.set_simulator(folder / "study.toml", box_truths.LAYERS)
+        simulator = load_study(folder).simulator
+        assert isinstance(simulator, BoxSimulator)
+        assert (simulator.window_model, simulator.sky_model) == ("layers", "perez")

@@ -456,6 +456,21 @@ def test_box_sky_air_split_reaches_the_simulator() -> None:
         assert sim.inner.sky_air_split is (setting is not False)  # on by default
 
 
+def test_box_window_model_reaches_the_simulator() -> None:
+    for setting in (None, "transmittance", "layers"):
+        study = (
+            _box
+            if setting is None
+            else _then(_box, lambda r, v=setting: r["simulator"].update(window_model=v))
+        )
+        sim = build_simulator(_validate(study))
+        assert isinstance(sim, TargetedSimulator)
+        assert isinstance(sim.inner, TestBox)
+        assert sim.inner.window_model == (setting or "transmittance")  # the paper's by default
+    with pytest.raises(ConfigError, match="window_model"):
+        _validate(_then(_box, lambda r: r["simulator"].update(window_model="tinted")))
+
+
 def test_simulator_sections_agree_with_the_simulators() -> None:
     study = load_study(FIXTURE)
     wall_cfg = study.simulator

@@ -142,6 +142,30 @@ def test_incidence_angle_modifier_of_double_glazing():
     assert iam[2] == pytest.approx(single**2, rel=1e-12)
 
 
+def test_pane_absorptance_modifier():
+    aoi = np.array([0.0, 30.0, 60.0, 75.0, 90.0])
+    a0 = 0.315  # the box's outer pane: 1 - 0.61 - 0.075
+    mod = solar.pane_absorptance_iam(aoi, a0)
+    assert mod[0] == pytest.approx(1.0, abs=1e-12)  # normalised at normal incidence
+    # The refracted path lengthens as 1/cos(theta_t) (x1.21 at 60 degrees), so the
+    # absorptance rises, then Fresnel reflection takes over and it falls to 0.
+    assert 1.0 < mod[1] < mod[2] < 1.2
+    assert mod[3] < mod[2]
+    assert mod[4] == pytest.approx(0.0, abs=1e-12)
+    # By hand at 60 degrees: n = 1.526, tau(0) from the normal absorptance.
+    n, r0 = 1.526, ((1.526 - 1) / (1.526 + 1)) ** 2
+    c = 1 - a0 / (1 - r0)
+    tau0 = (-(1 - r0) + np.sqrt((1 - r0) ** 2 + 4 * r0 * c)) / (2 * r0)
+    assert (1 - r0) * (1 - tau0) * (1 + r0 * tau0) == pytest.approx(a0, rel=1e-12)
+    ci, ct = np.cos(np.radians(60.0)), np.sqrt(1 - (np.sin(np.radians(60.0)) / n) ** 2)
+    r = 0.5 * (((ci - n * ct) / (ci + n * ct)) ** 2 + ((ct - n * ci) / (ct + n * ci)) ** 2)
+    tau = tau0 ** (1 / ct)
+    assert mod[2] == pytest.approx((1 - r) * (1 - tau) * (1 + r * tau) / a0, rel=1e-12)
+    np.testing.assert_array_equal(solar.pane_absorptance_iam(aoi, 0.0), 1.0)
+    with pytest.raises(SimulatorError, match="pane absorptance must be in"):
+        solar.pane_absorptance_iam(aoi, 0.97)
+
+
 def test_hemispherical_average_quadrature():
     # 2∫cos^p θ cos θ sin θ dθ = 2/(p+2): 1 for a constant, 2/3 for cos θ; Gauss–Legendre
     # with 64 nodes integrates these smooth functions to round-off.

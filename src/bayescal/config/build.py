@@ -74,6 +74,7 @@ def _box(section: BoxSimulator, study: Study) -> Simulator:
         max_step=section.max_step,
         sky_model=section.sky_model,
         sky_air_split=section.sky_air_split,
+        window_model=section.window_model,
         **section.constants,
     )
     targets = {name: tuple(p.targets) for name, p in study.parameters.items()}

@@ -150,7 +150,8 @@ _BOX_KINDS |= {"r_ag": "resistance", "r_glass": "resistance", "c_internal": "cap
 _BOX_KINDS |= {name: "length" for name in ("thickness", "side", "glazed_side")}
 _BOX_KINDS |= {f"h_in_{s}": "coefficient" for s in ("wall", "ceiling", "floor")}
 _BOX_KINDS |= {"h_out_a": "coefficient", "h_out_b": "wind_coefficient", "ua_leak": "conductance"}
-"""Kinds of the box constants; the others (t_w, emissivities, absorptivity, albedo) are [-]."""
+"""Kinds of the box constants; the others (t_w, reflectance_w, emissivities, absorptivities,
+albedo) are [-]."""
 
 
 class BoxSimulator(SimulatorBase):
@@ -175,7 +176,9 @@ class BoxSimulator(SimulatorBase):
     constants: dict[str, float] = field_doc(
         "Values overriding the box's nominal constants (bayescal.simulators.box.DEFAULTS: "
         "k_wall [W/(m·K)], d_wall [kg/m³], c_wall [J/(kg·K)], r_ag [m²·K/W], t_w [-], "
-        "emissivity [-], absorptivity [-], geometry and surface coefficients).",
+        "emissivity [-], absorptivity [-], geometry and surface coefficients; with "
+        "window_model = 'layers' also reflectance_w [-], the window's solar reflectance, "
+        "and absorptivity_in [-], the inside faces' solar absorptance).",
         {"c_wall": 800.0, "emissivity": 0.85},
         default_factory=dict,
     )
@@ -192,6 +195,16 @@ class BoxSimulator(SimulatorBase):
         "temperature.",
         False,
         default=True,
+    )
+    window_model: Literal["transmittance", "layers"] = field_doc(
+        "Solar physics of the window: 'transmittance' (the paper's) transmits t_w and "
+        "absorbs nothing in the glazing, and the inside faces absorb all the light that "
+        "enters; 'layers' also absorbs 1 - t_w - reflectance_w in the glazing (its inward "
+        "share is a heat gain), sends the beam where the sun's direction takes it and lets "
+        "the inside faces (absorptivity_in) reflect light back out through the window "
+        "(bayescal.simulators.box, 'Window').",
+        "layers",
+        default="transmittance",
     )
 
     @field_validator("constants")

@@ -27,11 +27,26 @@ Window
     ``emissivity_glass``. Solar transmittance ``t_w`` at normal incidence times
     the incidence-angle modifier of two clear panes
     (:func:`~bayescal.simulators.solar.double_glazing_iam`) for the beam, and
-    times its hemispherical average for sky and ground diffuse light. Solar
-    absorbed in the panes is neglected. The transmitted solar power is absorbed
-    at the inside surfaces of the five other faces in proportion to their areas
-    (a cavity absorbs nearly all the light that enters it; what leaves again
-    through the window is neglected).
+    times its hemispherical average for sky and ground diffuse light.
+    ``window_model = "transmittance"`` (the paper's, default): solar absorbed
+    in the panes is neglected, and the transmitted power is absorbed at the
+    inside surfaces of the five other faces in proportion to their areas (a
+    cavity absorbs nearly all the light that enters it).
+    ``window_model = "layers"``: the glazing reflects ``reflectance_w`` at
+    normal incidence and absorbs the rest, ``1 - t_w - reflectance_w`` (0
+    where negative), in its outer pane with one pane's angular dependence
+    (:func:`~bayescal.simulators.solar.pane_absorptance_iam`); that power
+    enters the glazing's outside equivalent temperature (sol-air), so that the
+    share ``U / h_out`` of it flows inwards (the secondary heat gain of the
+    EnergyPlus, ESP-r and ISO 52016 window models). The transmitted beam
+    falls on the faces its direction reaches through the glazed square, the
+    diffuse light on the five faces in proportion to their areas; they absorb
+    ``absorptivity_in`` of it and reflect the rest diffusely, shared as in an
+    integrating sphere between the faces (absorbing ``absorptivity_in``) and
+    the glazing, which sends light back out or absorbs it
+    (:mod:`~bayescal.simulators.box_solar`). With 0.4 about 6 % of the
+    transmitted power leaves again, as in EnergyPlus's full interior
+    distribution of the same box.
 Exterior surfaces
     Absorbed solar ``absorptivity · G_face`` (pvlib's transposition); convection
     ``h_c = h_out_a + h_out_b · v`` (ISO 6946 annex C: 4 + 4 v); long-wave
@@ -80,8 +95,9 @@ from scipy.constants import Stefan_Boltzmann, zero_Celsius
 from scipy.linalg import solve
 
 from bayescal.errors import SimulatorError
-from bayescal.simulators import solar
+from bayescal.simulators import box_solar, solar
 from bayescal.simulators.base import Forcing, check_parameters
+from bayescal.simulators.box_flows import BoxRun, Drivers
 from bayescal.simulators.diagonal_update import DiagonalUpdateSolver
 from bayescal.simulators.fvm import Layer, Mesh, build_mesh
 
@@ -100,6 +116,8 @@ DEFAULTS: dict[str, float] = {
     "c_wall": 800.0,
     "r_ag": 0.26,
     "t_w": 0.61,
+    "reflectance_w": 0.075,
+    "absorptivity_in": 0.4,
     "emissivity": 0.85,
     "absorptivity": 0.4,
     "thickness": 0.12,
@@ -119,6 +137,9 @@ DEFAULTS: dict[str, float] = {
 """Nominal values (paper's Table 5 for the first seven). Units: ``k_wall``
 [W/(m·K)], ``d_wall`` [kg/m³], ``c_wall`` [J/(kg·K)], ``r_ag`` and ``r_glass``
 (both panes) [m²·K/W], ``t_w``, emissivities, ``absorptivity``, ``albedo`` [-],
+``reflectance_w`` (the window's normal-incidence solar reflectance; 0.075 as the
+outer pane of ``models/test_box.epJSON``) and ``absorptivity_in`` (the inside
+faces' solar absorptance) [-], both read by ``window_model = "layers"`` only,
 ``thickness``, ``side`` (inner edge) and ``glazed_side`` [m], ``h_in_*`` and
 ``h_out_a`` [W/(m²·K)], ``h_out_b`` [J/(m³·K)], ``c_internal`` [J/K] (extra
 capacity on the air node), ``ua_leak`` [W/K] (air leakage or thermal bridges
@@ -129,7 +150,10 @@ _POSITIVE = (
     *("h_in_wall", "h_in_ceiling", "h_in_floor"),
 )
 _NON_NEGATIVE = ("r_ag", "r_glass", "h_out_a", "h_out_b", "c_internal", "ua_leak", "glazed_side")
-_FRACTIONS = ("t_w", "emissivity", "absorptivity", "emissivity_glass", "albedo")
+_FRACTIONS = (
+    *("t_w", "reflectance_w", "emissivity", "absorptivity", "absorptivity_in"),
+    *("emissivity_glass", "albedo"),
+)
 PAPER_PARAMETERS = ("k_wall", "d_wall", "r_ag", "t_w")
 N_EXT = 7  # exterior surfaces: six faces and the window
 
@@ -273,86 +297,6 @@ def assemble(values: Mapping[str, float], geo: Geometry, cells: int) -> System:
     return System(mesh, capacity, conduction, outside, inside, air)
 
 
-@dataclass(frozen=True)
-class Drivers:
-    """Boundary conditions on the stepping grid, shape ``(n,)`` or ``(n, 6)``.
-
-    Attributes
-    ----------
-    temp_out
-        Outside air (and ground) temperature. [°C]
-    temp_sky
-        Effective sky temperature. [°C]
-    h_conv
-        Exterior convective coefficient. [W/(m²·K)]
-    solar_out
-        Solar power absorbed at each face's outside surface. [W]
-    solar_in
-        Transmitted solar power absorbed at each face's inside surface. [W]
-    control
-        Imposed air temperature [°C] (coheating) or heat input [W] (free-float).
-    """
-
-    temp_out: np.ndarray
-    temp_sky: np.ndarray
-    h_conv: np.ndarray
-    solar_out: np.ndarray
-    solar_in: np.ndarray
-    control: np.ndarray
-
-
-@dataclass(frozen=True)
-class BoxRun:
-    """A detailed run on the stepping grid (``n`` instants, ``dt`` apart).
-
-    Energy flows are positive into the box; step ``j >= 1`` is the backward-Euler
-    step from instant ``j-1`` to ``j`` and its flows are those of instant ``j``,
-    so that ``stored[j] - stored[j-1] = dt * (heat_to_air + exterior.sum(1) +
-    window + leak + solar_transmitted)[j]``. Entries at ``j = 0`` belong to the
-    initial steady state.
-
-    Attributes
-    ----------
-    dt
-        Step. [s]
-    temperatures
-        Node temperatures, shape ``(n, n_nodes)``: face ``f``'s mesh nodes
-        (outside first) at ``f*m ... f*m + m - 1``, the air node last. [°C]
-    capacity
-        Node heat capacities, shape ``(n_nodes,)``. [J/K]
-    heat_to_air
-        Heat added to the air node (heating power or heat input). [W]
-    exterior
-        Heat entering each face at its outside surface (absorbed solar,
-        convection, long-wave), shape ``(n, 6)``. [W]
-    window
-        Heat entering the air node through the glazing (solar excluded). [W]
-    leak
-        Heat entering the air node through ``ua_leak``. [W]
-    solar_transmitted
-        Solar power transmitted by the window. [W]
-    """
-
-    dt: float
-    temperatures: np.ndarray
-    capacity: np.ndarray
-    heat_to_air: np.ndarray
-    exterior: np.ndarray
-    window: np.ndarray
-    leak: np.ndarray
-    solar_transmitted: np.ndarray
-
-    @property
-    def temp_air_in(self) -> np.ndarray:
-        """Inside air temperature. [°C]"""
-        return self.temperatures[:, -1]
-
-    @property
-    def stored(self) -> np.ndarray:
-        """Stored heat relative to 0 °C. [J]"""
-        return self.temperatures @ self.capacity
-
-
 class TestBox:
     """The Annex 58 round-robin test box (module docstring), a :class:`Simulator`.
 
@@ -384,6 +328,12 @@ class TestBox:
         the air temperature as EnergyPlus does
         (:func:`~bayescal.simulators.solar.longwave_view_factors`); ``False``
         puts the whole sky view at the sky temperature.
+    window_model
+        ``"transmittance"`` (the paper's): the glazing transmits ``t_w`` and
+        absorbs nothing, the inside faces absorb all the light that enters;
+        ``"layers"``: the glazing also absorbs, the beam falls where the sun's
+        direction takes it and the inside faces reflect (module docstring,
+        "Window").
     **constants
         Values overriding :data:`DEFAULTS` (units there).
     """
@@ -403,12 +353,17 @@ class TestBox:
         max_step: float = 600.0,
         sky_model: str = "haydavies",
         sky_air_split: bool = True,
+        window_model: str = "transmittance",
         **constants: float,
     ) -> None:
         if mode not in MODES:
             raise SimulatorError(f"TestBox mode must be one of {MODES}, got {mode!r}")
         if sky_model not in solar.SKY_MODELS:
             raise SimulatorError(f"unknown sky_model {sky_model!r}; use one of {solar.SKY_MODELS}")
+        if window_model not in box_solar.WINDOW_MODELS:
+            raise SimulatorError(
+                f"unknown window_model {window_model!r}; use one of {box_solar.WINDOW_MODELS}"
+            )
         if int(cells) < 1 or not max_step > 0:
             raise SimulatorError(
                 f"cells must be >= 1 and max_step > 0, got {cells!r}, {max_step!r}"
@@ -428,6 +383,7 @@ class TestBox:
         self.max_step = float(max_step)
         self.sky_model = sky_model
         self.sky_air_split = bool(sky_air_split)
+        self.window_model = window_model
         self.constants = {**DEFAULTS, **{k: float(v) for k, v in constants.items()}}
         self._parameters = tuple(parameters)
         _check_values(self.constants)
@@ -531,15 +487,8 @@ class TestBox:
             for t, a in zip(geo.tilt[:6], geo.azimuth[:6], strict=True)
         ]
         solar_out = values["absorptivity"] * geo.area * np.column_stack([p.total for p in planes])
-        front = planes[0]
-        diffuse_iam = solar.hemispherical_average(solar.double_glazing_iam)
-        transmitted = (
-            values["t_w"]
-            * geo.window_area
-            * (
-                solar.double_glazing_iam(front.aoi) * front.beam
-                + diffuse_iam * (front.sky_diffuse + front.ground_diffuse)
-            )
+        solar_in, returned, absorbed = box_solar.window_solar(
+            values, geo, planes[0], sky, self.window_azimuth, self.window_model
         )
         if self.mode == "coheating":
             control = series["temp_air_in"]
@@ -552,7 +501,9 @@ class TestBox:
                 series["wind_speed"], values["h_out_a"], values["h_out_b"]
             ),
             solar_out=solar_out,
-            solar_in=transmitted[:, None] * geo.solar_share[None, :],
+            solar_in=solar_in,
+            solar_returned=returned,
+            window_absorbed=absorbed,
             control=control,
         )
 
@@ -613,6 +564,7 @@ def _exterior(rad: tuple[np.ndarray, ...], d: Drivers, j: int, t_surf: np.ndarra
     h_air = c_air * (ts2 + tair * tair) * (ts + tair)
     h_out = d.h_conv[j] + h_sky + h_air
     num = (d.h_conv[j] + h_air) * d.temp_out[j] + h_sky * d.temp_sky[j]
+    num[6] += d.window_absorbed[j]
     return _Exterior(h_out, num)
 
 
@@ -770,8 +722,10 @@ def _account(
     exterior = geo.area * (num[:, :6] - h_out[:, :6] * temps[:, sys.outside]) + d.solar_out
     # The initial state is a steady state without sun: its solar flows are zero.
     exterior[0] -= d.solar_out[0]
-    transmitted = d.solar_in.sum(axis=1)
+    transmitted = d.solar_in.sum(axis=1) + d.solar_returned
     transmitted[0] = 0.0
+    returned = d.solar_returned.copy()
+    returned[0] = 0.0
     return BoxRun(
         dt=dt,
         temperatures=temps,
@@ -781,4 +735,6 @@ def _account(
         window=window,
         leak=leak,
         solar_transmitted=transmitted,
+        solar_returned=returned,
+        solar_glazing=geo.window_area * d.window_absorbed,
     )

@@ -5,8 +5,8 @@
   any tilt (``pvlib.irradiance``: isotropic, Hay–Davies or Perez sky diffuse,
   ground-reflected with an albedo), returned by component so that a window can
   weight beam and diffuse light with different incidence-angle modifiers.
-- Incidence-angle modifier of clear double glazing and its hemispherical
-  (diffuse) average.
+- Incidence-angle modifiers of clear double glazing (transmittance) and of
+  one pane's absorptance, and their hemispherical (diffuse) average.
 - Effective sky temperature: from measured horizontal infrared irradiance, from
   the Berdahl & Martin clear-sky emissivity (dew point), or from Swinbank's
   formula (air temperature only).
@@ -387,6 +387,64 @@ def double_glazing_iam(
     """
     single = pvlib.iam.physical(np.asarray(aoi, dtype=float), n=n, K=extinction, L=thickness)
     return np.asarray(single, dtype=float) ** 2
+
+
+def pane_absorptance_iam(aoi: npt.ArrayLike, absorptance: float, n: float = 1.526) -> np.ndarray:
+    """Incidence-angle modifier of the solar absorptance of one uncoated pane.
+
+    Fresnel reflection at the faces (unpolarised, refractive index ``n``) and
+    Bouguer absorption along the refracted path, with one internal reflection:
+    ``a(θ) = (1 - r)(1 - τ)(1 + r τ)``, ``τ = exp(-κ / cos θ_t)``; ``κ`` is
+    solved so that ``a(0)`` is the given normal-incidence ``absorptance``. The
+    longer path raises the absorptance up to about 60°; reflection makes it fall
+    to 0 at grazing incidence. This is how EnergyPlus derives angular properties
+    of a glazing given by its normal-incidence solar transmittance and
+    reflectance (Engineering Reference, "Window Calculation Module", uncoated
+    glass), here with the reflectance fixed by ``n``.
+
+    Parameters
+    ----------
+    aoi
+        Angle of incidence. [°]
+    absorptance
+        Solar absorptance at normal incidence, below ``1 - r(0)``
+        (0.957 for ``n`` = 1.526). [-]
+    n
+        Refractive index of the glass. [-]
+
+    Returns
+    -------
+    numpy.ndarray
+        Absorptance relative to normal incidence (ones where ``absorptance`` is 0). [-]
+
+    Raises
+    ------
+    SimulatorError
+        If ``absorptance`` is outside ``[0, 1 - r(0))``.
+    """
+    theta = np.radians(np.clip(np.asarray(aoi, dtype=float), 0.0, 90.0))
+    r0 = ((n - 1.0) / (n + 1.0)) ** 2
+    if not 0.0 <= absorptance < 1.0 - r0:
+        raise SimulatorError(
+            f"pane absorptance must be in [0, {1.0 - r0:.3f}) for a refractive index of "
+            f"{n}, got {absorptance!r}"
+        )
+    if absorptance == 0.0:
+        return np.ones_like(theta)
+    # r0 u^2 + (1 - r0) u - (1 - a / (1 - r0)) = 0 for u = tau(0).
+    c = 1.0 - absorptance / (1.0 - r0)
+    tau0 = (-(1.0 - r0) + np.sqrt((1.0 - r0) ** 2 + 4.0 * r0 * c)) / (2.0 * r0)
+    kappa = -np.log(tau0)
+    cos_i = np.cos(theta)
+    sin_t = np.sin(theta) / n
+    cos_t = np.sqrt(1.0 - sin_t**2)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        r_s = ((cos_i - n * cos_t) / (cos_i + n * cos_t)) ** 2
+        r_p = ((cos_t - n * cos_i) / (cos_t + n * cos_i)) ** 2
+    r = 0.5 * (r_s + r_p)
+    tau = np.exp(-kappa / cos_t)
+    a = (1.0 - r) * (1.0 - tau) * (1.0 + r * tau)
+    return np.asarray(a / absorptance, dtype=float)
 
 
 def hemispherical_average(iam: Callable[[np.ndarray], np.ndarray], nodes: int = 64) -> float:
