@@ -47,6 +47,13 @@ def box(mode: str, **constants: float) -> TestBox:
     return TestBox(mode=mode, **UCCLE, **{**EXPLICIT, **constants})
 
 
+def sunny_coheating(n: int, step: float) -> Forcing:
+    """Clear-sky weather at Uccle from 10 March 2013 (the clock the sun's position
+    is computed on), air held at 25 °C."""
+    series = {**weather(n, step), "temp_air_in": np.full(n, 25.0)}
+    return Forcing(step=step, series=series, start=np.datetime64("2013-03-10T00:00"))
+
+
 def layered(mode: str, **constants: float) -> TestBox:
     """The box with ``window_model = "layers"``."""
     return TestBox(mode=mode, window_model="layers", **UCCLE, **{**EXPLICIT, **constants})
@@ -456,11 +463,7 @@ def test_solar_absorbed_in_the_glazing_is_a_secondary_gain():
     # the inward share U / h_out of the absorbed power (a few per cent of the
     # transmitted gain).
     n, step = 2 * 288, 300.0
-    f = Forcing(
-        step=step,
-        series={**weather(n, step), "temp_air_in": np.full(n, 25.0)},
-        start=np.datetime64("2013-03-10T00:00"),
-    )
+    f = sunny_coheating(n, step)
     clear = layered("coheating", reflectance_w=1.0).run({"t_w": 0.6}, f)
     tinted = layered("coheating", reflectance_w=0.075).run({"t_w": 0.6}, f)
     np.testing.assert_allclose(clear.solar_transmitted, tinted.solar_transmitted, rtol=1e-12)
@@ -479,11 +482,7 @@ def test_solar_absorbed_in_the_glazing_is_a_secondary_gain():
 
 def test_transmittance_model_keeps_all_the_light_inside():
     n, step = 288, 300.0
-    f = Forcing(
-        step=step,
-        series={**weather(n, step), "temp_air_in": np.full(n, 25.0)},
-        start=np.datetime64("2013-03-10T00:00"),
-    )
+    f = sunny_coheating(n, step)
     run = box("coheating").run({"t_w": 0.6}, f)
     assert run.solar_transmitted.max() > 50.0
     np.testing.assert_array_equal(run.solar_returned, 0.0)
@@ -519,11 +518,7 @@ def test_light_leaving_through_the_window_again():
     # about 6 % of the transmitted power back out. Black faces keep it all, white
     # ones lose most of it through the window.
     n, step = 288, 300.0
-    f = Forcing(
-        step=step,
-        series={**weather(n, step), "temp_air_in": np.full(n, 25.0)},
-        start=np.datetime64("2013-03-10T00:00"),
-    )
+    f = sunny_coheating(n, step)
     lost = {}
     for alpha in (1.0, 0.4, 0.05):
         run = layered("coheating", absorptivity_in=alpha).run({"t_w": 0.6}, f)
