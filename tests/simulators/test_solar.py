@@ -7,6 +7,7 @@ import pandas as pd
 import pvlib
 import pytest
 from scipy.constants import Stefan_Boltzmann, zero_Celsius
+from scipy.optimize import brentq
 
 from bayescal.errors import SimulatorError
 from bayescal.simulators import solar
@@ -152,15 +153,23 @@ def test_pane_absorptance_modifier():
     assert 1.0 < mod[1] < mod[2] < 1.2
     assert mod[3] < mod[2]
     assert mod[4] == pytest.approx(0.0, abs=1e-12)
-    # By hand at 60 degrees: n = 1.526, tau(0) from the normal absorptance.
-    n, r0 = 1.526, ((1.526 - 1) / (1.526 + 1)) ** 2
-    c = 1 - a0 / (1 - r0)
-    tau0 = (-(1 - r0) + np.sqrt((1 - r0) ** 2 + 4 * r0 * c)) / (2 * r0)
-    assert (1 - r0) * (1 - tau0) * (1 + r0 * tau0) == pytest.approx(a0, rel=1e-12)
-    ci, ct = np.cos(np.radians(60.0)), np.sqrt(1 - (np.sin(np.radians(60.0)) / n) ** 2)
-    r = 0.5 * (((ci - n * ct) / (ci + n * ct)) ** 2 + ((ct - n * ci) / (ct + n * ci)) ** 2)
-    tau = tau0 ** (1 / ct)
-    assert mod[2] == pytest.approx((1 - r) * (1 - tau) * (1 + r * tau) / a0, rel=1e-12)
+    # Independent reference: a slab with the full series of internal reflections,
+    # each polarisation on its own, (1 - r)(1 - tau) / (1 - r tau), averaged; its
+    # absorption coefficient solved (by root finding) for the same normal absorptance.
+    n = 1.526
+
+    def slab(theta: float, kappa: float) -> float:
+        ci, ct = np.cos(theta), np.sqrt(1 - (np.sin(theta) / n) ** 2)
+        tau = np.exp(-kappa / ct)
+        rs = ((ci - n * ct) / (ci + n * ct)) ** 2
+        rp = ((ct - n * ci) / (ct + n * ci)) ** 2
+        return float(np.mean([(1 - r) * (1 - tau) / (1 - r * tau) for r in (rs, rp)]))
+
+    kappa = brentq(lambda k: slab(0.0, k) - a0, 1e-6, 10.0)
+    # Measured: within 0.02 % up to 60 degrees, 1.3 % at 75, 4 % at 80.
+    for angle, value in zip((30.0, 60.0), mod[1:3], strict=True):
+        full = slab(np.radians(angle), kappa) / a0
+        assert value == pytest.approx(full, rel=0.002), angle
     np.testing.assert_array_equal(solar.pane_absorptance_iam(aoi, 0.0), 1.0)
     with pytest.raises(SimulatorError, match="pane absorptance must be in"):
         solar.pane_absorptance_iam(aoi, 0.97)

@@ -45,8 +45,13 @@ Window
     integrating sphere between the faces (absorbing ``absorptivity_in``) and
     the glazing, which sends light back out or absorbs it
     (:mod:`~bayescal.simulators.box_solar`). With 0.4 about 6 % of the
-    transmitted power leaves again, as in EnergyPlus's full interior
-    distribution of the same box.
+    transmitted power reaches the glazing again (about 4 % sent back out, 2 %
+    absorbed in it), as the inside faces of EnergyPlus's box, with its full
+    interior distribution, miss 6 % of it. Transmittance keeps the two-pane
+    angular modifier and absorptance takes one pane's, so the reflectance they
+    leave (``1 - T - A``) is not a Fresnel curve off normal incidence (0.061
+    at 45°, 0.097 at 60° for the defaults); the window's solar balance is
+    right at normal incidence and approximate beyond.
 Exterior surfaces
     Absorbed solar ``absorptivity · G_face`` (pvlib's transposition); convection
     ``h_c = h_out_a + h_out_b · v`` (ISO 6946 annex C: 4 + 4 v); long-wave
@@ -116,8 +121,6 @@ DEFAULTS: dict[str, float] = {
     "c_wall": 800.0,
     "r_ag": 0.26,
     "t_w": 0.61,
-    "reflectance_w": 0.075,
-    "absorptivity_in": 0.4,
     "emissivity": 0.85,
     "absorptivity": 0.4,
     "thickness": 0.12,
@@ -131,6 +134,8 @@ DEFAULTS: dict[str, float] = {
     "h_out_a": 4.0,
     "h_out_b": 4.0,
     "albedo": 0.2,
+    "reflectance_w": 0.075,
+    "absorptivity_in": 0.4,
     "c_internal": 0.0,
     "ua_leak": 0.0,
 }
@@ -173,8 +178,10 @@ class Geometry:
     h_in
         Inside surface coefficient of each face, shape ``(6,)``. [W/(m²·K)]
     solar_share
-        Fraction of the transmitted solar power absorbed at each face's inside
-        surface, shape ``(6,)``. [-]
+        Share of the transmitted solar power (``window_model = "layers"``: of its
+        diffuse part) that falls first on each face's inside surface, in
+        proportion to the areas of the five faces other than the front, shape
+        ``(6,)``. [-]
     f_sky, f_air
         Long-wave view factors at the sky temperature and at outside air
         temperature (ground, and the sky near the horizon when the sky view is
@@ -386,7 +393,7 @@ class TestBox:
         self.window_model = window_model
         self.constants = {**DEFAULTS, **{k: float(v) for k, v in constants.items()}}
         self._parameters = tuple(parameters)
-        _check_values(self.constants)
+        _check_values(self.constants, self.window_model)
 
     @property
     def parameter_names(self) -> tuple[str, ...]:
@@ -415,7 +422,7 @@ class TestBox:
         parameters = dict(parameters or {})
         check_parameters(parameters, self._parameters, "TestBox")
         values = {**self.constants, **{k: float(v) for k, v in parameters.items()}}
-        _check_values(values)
+        _check_values(values, self.window_model)
         return values
 
     def steady_ua(
@@ -508,7 +515,7 @@ class TestBox:
         )
 
 
-def _check_values(values: Mapping[str, float]) -> None:
+def _check_values(values: Mapping[str, float], window_model: str = "transmittance") -> None:
     for name in _POSITIVE:
         if not values[name] > 0:
             raise SimulatorError(f"TestBox: {name} must be > 0, got {values[name]!r}")
@@ -518,6 +525,12 @@ def _check_values(values: Mapping[str, float]) -> None:
     for name in _FRACTIONS:
         if not 0 <= values[name] <= 1:
             raise SimulatorError(f"TestBox: {name} must be in [0, 1], got {values[name]!r}")
+    passed = values["t_w"] + values["reflectance_w"]
+    if window_model == "layers" and not 0.05 <= passed <= 1.0:
+        raise SimulatorError(
+            f"TestBox: t_w + reflectance_w must be in [0.05, 1] (the glazing absorbs the rest; "
+            f"glass reflects at least 4 %), got {values['t_w']!r} + {values['reflectance_w']!r}"
+        )
     if values["glazed_side"] >= values["side"]:
         raise SimulatorError(
             f"TestBox: glazed_side ({values['glazed_side']!r} m) must be smaller than "

@@ -31,7 +31,7 @@ _GRID = 12  # rays across each side of the glazing
 
 
 class _Faces(Protocol):
-    """What :func:`interior_solar` reads of the box's geometry."""
+    """What :func:`window_solar` and :func:`interior_solar` read of the box's geometry."""
 
     @property
     def area(self) -> np.ndarray: ...
@@ -78,23 +78,28 @@ def window_solar(
     """
     t_w, area = values["t_w"], geo.window_area
     beam = t_w * area * solar.double_glazing_iam(front.aoi) * front.beam
-    diffuse_iam = solar.hemispherical_average(solar.double_glazing_iam)
-    diffuse = t_w * area * diffuse_iam * (front.sky_diffuse + front.ground_diffuse)
+    t_diffuse = t_w * solar.hemispherical_average(solar.double_glazing_iam)
+    diffuse = area * t_diffuse * (front.sky_diffuse + front.ground_diffuse)
     if window_model == "transmittance":
         zero = np.zeros_like(beam)
         return (beam + diffuse)[:, None] * geo.solar_share[None, :], zero, zero.copy()
     first_hit = beam_first_hit(
-        np.asarray(sky.zenith), sky.azimuth, window_azimuth, values["side"], values["glazed_side"]
+        np.asarray(sky.zenith),
+        sky.azimuth,
+        window_azimuth,
+        values["side"],
+        values["glazed_side"],
+        geo.solar_share,
     )
-    solar_in, sent_out, glazing = interior_solar(values, geo, beam, diffuse, first_hit)
+    solar_in, sent_out, glazing = interior_solar(values, geo, beam, diffuse, first_hit, t_diffuse)
     absorbed = window_absorbed(values, front) + glazing / area
     absorbed[0] = 0.0
     return solar_in, sent_out + glazing, absorbed
 
 
 def pane_absorptance(values: Mapping[str, float]) -> float:
-    """Normal-incidence solar absorptance of the glazing: ``1 - t_w - reflectance_w``,
-    0 where that is negative. [-]"""
+    """Normal-incidence solar absorptance of the glazing: ``1 - t_w - reflectance_w``
+    (:class:`~bayescal.simulators.box.TestBox` refuses a negative one). [-]"""
     return max(0.0, 1.0 - values["t_w"] - values["reflectance_w"])
 
 
@@ -120,6 +125,7 @@ def beam_first_hit(
     window_azimuth: float,
     side: float,
     glazed_side: float,
+    diffuse_share: np.ndarray,
 ) -> np.ndarray:
     """Share of the transmitted beam that each face meets first, shape ``(n, 6)``.
 
@@ -128,7 +134,7 @@ def beam_first_hit(
     the sun's direction; each is counted on the face it reaches first (sides,
     back or floor; the front cannot be reached, nor the roof by a sun above the
     horizon). Where the sun is behind the window plane (no beam enters), the
-    shares are those of the diffuse light, in proportion to the faces' areas.
+    shares are ``diffuse_share``, those of the diffuse light.
     Faces in the order of :data:`bayescal.simulators.box.FACES`.
 
     Parameters
@@ -139,6 +145,8 @@ def beam_first_hit(
         Azimuth the window faces. [°]
     side, glazed_side
         Inner edge of the box and edge of the glazed square. [m]
+    diffuse_share
+        Shares of the faces where no beam enters, shape ``(6,)``. [-]
     """
     z = np.radians(np.asarray(zenith, dtype=float))[:, None]
     rel = np.radians(np.asarray(azimuth, dtype=float) - window_azimuth)[:, None]
@@ -161,8 +169,7 @@ def beam_first_hit(
     shares = np.zeros((z.shape[0], 6))
     for k, face in enumerate((1, 2, 3, 5)):
         shares[:, face] = (first == k).mean(axis=1)
-    diffuse = np.r_[0.0, 1.0, 1.0, 1.0, 1.0, 1.0] / 5.0
-    return np.where(enters, shares, diffuse[None, :])
+    return np.where(enters, shares, np.asarray(diffuse_share, dtype=float)[None, :])
 
 
 def interior_solar(
@@ -171,6 +178,7 @@ def interior_solar(
     beam: np.ndarray,
     diffuse: np.ndarray,
     first_hit: np.ndarray,
+    t_diffuse: float,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Where the transmitted solar power goes.
 
@@ -180,8 +188,8 @@ def interior_solar(
     (``geo.solar_share``); they absorb ``absorptivity_in`` of it. The rest is
     reflected diffusely and shared as in an integrating sphere between the
     faces' opaque areas (absorbing ``absorptivity_in``) and the glazing, which
-    sends back out its diffuse transmittance and absorbs its diffuse
-    absorptance. [W]
+    sends back out its diffuse transmittance ``t_diffuse`` and absorbs its
+    diffuse absorptance. [W]
 
     Returns
     -------
@@ -190,7 +198,7 @@ def interior_solar(
         through the glazing and absorbed in it, shape ``(n,)`` each.
     """
     alpha = values["absorptivity_in"]
-    t_d = values["t_w"] * solar.hemispherical_average(solar.double_glazing_iam)
+    t_d = t_diffuse
     a_d = _diffuse_absorptance(pane_absorptance(values))
     sink_faces = alpha * geo.area.sum()
     sink_window = geo.window_area * (t_d + a_d)
