@@ -86,18 +86,19 @@ DISCREPANCY = {
 }
 
 
+def _edit_once(study: Path, pattern: str, replace: str, what: str) -> None:
+    """Replace the one match of ``pattern`` (a line) in ``study`` by ``replace``."""
+    text, count = re.subn(pattern, replace, study.read_text(encoding="utf-8"), flags=re.M)
+    if count != 1:
+        raise RuntimeError(f"{study}: expected one {what}, found {count}")
+    study.write_text(text, encoding="utf-8")
+
+
 def set_discrepancy(study: Path, kind: str) -> None:
     """Replace the one ``discrepancy = ...`` line of the example's ``study`` file by
     ``kind`` (a key of :data:`DISCREPANCY`)."""
-    text, count = re.subn(
-        r"^discrepancy = .*$",
-        f"discrepancy = {DISCREPANCY[kind]}",
-        study.read_text(encoding="utf-8"),
-        flags=re.M,
-    )
-    if count != 1:
-        raise RuntimeError(f"{study}: expected one 'discrepancy = ' line, found {count}")
-    study.write_text(text, encoding="utf-8")
+    line = f"discrepancy = {DISCREPANCY[kind]}"
+    _edit_once(study, r"^discrepancy = .*$", line, "'discrepancy = ' line")
 
 
 #: ``[simulator]`` settings of ``--layers``.
@@ -106,12 +107,8 @@ LAYERS = {"window_model": '"layers"', "sky_model": '"perez"'}
 
 def set_simulator(study: Path, settings: dict[str, str]) -> None:
     """Add ``settings`` (key -> TOML value) to the ``[simulator]`` table of ``study``."""
-    text = study.read_text(encoding="utf-8")
     lines = "".join(f"{k} = {v}\n" for k, v in settings.items())
-    text, count = re.subn(r"^\[simulator\]\n", lambda m: m.group(0) + lines, text, flags=re.M)
-    if count != 1:
-        raise RuntimeError(f"{study}: expected one [simulator] table, found {count}")
-    study.write_text(text, encoding="utf-8")
+    _edit_once(study, r"^\[simulator\]\n", "[simulator]\n" + lines, "[simulator] table")
 
 
 def one_truth(

@@ -543,7 +543,10 @@ def test_interior_solar_shares_out_all_the_light() -> None:
     )
     for alpha in (0.4, 1.0):
         values = {**DEFAULTS, "absorptivity_in": alpha}
-        inside, out, glass = box_solar.interior_solar(values, geo, beam, diffuse, first, 0.5)
+        a_diffuse = box_solar.diffuse_absorptance(box_solar.pane_absorptance(values))
+        inside, out, glass = box_solar.interior_solar(
+            values, geo, beam, diffuse, first, 0.5, a_diffuse
+        )
         np.testing.assert_allclose(inside.sum(axis=1) + out + glass, beam + diffuse, rtol=1e-12)
         assert out.min() >= 0.0
         assert glass.min() >= 0.0

@@ -18,6 +18,7 @@ from bayescal.simulators import solar
 __all__ = [
     "WINDOW_MODELS",
     "beam_first_hit",
+    "diffuse_absorptance",
     "interior_solar",
     "pane_absorptance",
     "window_absorbed",
@@ -91,8 +92,11 @@ def window_solar(
         values["glazed_side"],
         geo.solar_share,
     )
-    solar_in, sent_out, glazing = interior_solar(values, geo, beam, diffuse, first_hit, t_diffuse)
-    absorbed = window_absorbed(values, front) + glazing / area
+    a_diffuse = diffuse_absorptance(pane_absorptance(values))
+    solar_in, sent_out, glazing = interior_solar(
+        values, geo, beam, diffuse, first_hit, t_diffuse, a_diffuse
+    )
+    absorbed = window_absorbed(values, front, a_diffuse) + glazing / area
     absorbed[0] = 0.0
     return solar_in, sent_out + glazing, absorbed
 
@@ -103,20 +107,23 @@ def pane_absorptance(values: Mapping[str, float]) -> float:
     return max(0.0, 1.0 - values["t_w"] - values["reflectance_w"])
 
 
-def _diffuse_absorptance(a_w: float) -> float:
+def diffuse_absorptance(a_w: float) -> float:
     """The glazing's absorptance for isotropic diffuse light. [-]"""
     if a_w == 0.0:
         return 0.0
     return a_w * solar.hemispherical_average(lambda aoi: solar.pane_absorptance_iam(aoi, a_w))
 
 
-def window_absorbed(values: Mapping[str, float], front: solar.PlaneIrradiance) -> np.ndarray:
-    """Solar power absorbed in the glazing from outside, per glazed area. [W/m²]"""
+def window_absorbed(
+    values: Mapping[str, float], front: solar.PlaneIrradiance, a_diffuse: float
+) -> np.ndarray:
+    """Solar power absorbed in the glazing from outside, per glazed area, given its
+    absorptance for diffuse light ``a_diffuse`` (:func:`diffuse_absorptance`). [W/m²]"""
     a_w = pane_absorptance(values)
     if a_w == 0.0:
         return np.zeros_like(front.beam)
     beam = a_w * solar.pane_absorptance_iam(front.aoi, a_w) * front.beam
-    return beam + _diffuse_absorptance(a_w) * (front.sky_diffuse + front.ground_diffuse)
+    return beam + a_diffuse * (front.sky_diffuse + front.ground_diffuse)
 
 
 def beam_first_hit(
@@ -179,6 +186,7 @@ def interior_solar(
     diffuse: np.ndarray,
     first_hit: np.ndarray,
     t_diffuse: float,
+    a_diffuse: float,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Where the transmitted solar power goes.
 
@@ -189,7 +197,7 @@ def interior_solar(
     reflected diffusely and shared as in an integrating sphere between the
     faces' opaque areas (absorbing ``absorptivity_in``) and the glazing, which
     sends back out its diffuse transmittance ``t_diffuse`` and absorbs its
-    diffuse absorptance. [W]
+    diffuse absorptance ``a_diffuse``. [W]
 
     Returns
     -------
@@ -198,8 +206,7 @@ def interior_solar(
         through the glazing and absorbed in it, shape ``(n,)`` each.
     """
     alpha = values["absorptivity_in"]
-    t_d = t_diffuse
-    a_d = _diffuse_absorptance(pane_absorptance(values))
+    t_d, a_d = t_diffuse, a_diffuse
     sink_faces = alpha * geo.area.sum()
     sink_window = geo.window_area * (t_d + a_d)
     to_faces = sink_faces / (sink_faces + sink_window) if sink_faces + sink_window > 0 else 1.0
