@@ -10,12 +10,13 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from bayescal.config import study_from_dict
+from bayescal.config import build_simulator, study_from_dict
 from bayescal.data.measured import load_measured
 from bayescal.data.meters import interval_values
 from bayescal.errors import ConfigError, DataError
 from bayescal.glossary import GLOSSARY, glossary_quantity
 from bayescal.metrics import fit_metrics, meets_guideline14, monthly_metrics
+from bayescal.simulators.wrappers import IntervalMeans
 from bayescal.units import dimension_of, to_internal
 
 HOUR = pd.Timedelta("1h")
@@ -132,12 +133,12 @@ def test_sum_of_a_temperature_is_refused(tmp_path: Path) -> None:
         study_from_dict(raw, root=tmp_path)
 
 
-def test_wall_cannot_give_interval_means(tmp_path: Path) -> None:
+def _wall_meter_study(tmp_path: Path, aggregate: str) -> dict[str, Any]:
     raw = _meter_study(tmp_path)
     raw["data"]["columns"] = {
         "temp_surf_out": {"source": "a", "unit": "degC"},
         "temp_surf_in": {"source": "b", "unit": "degC"},
-        "heat_flux_in": {"source": "q", "unit": "W/m2", "aggregate": "mean"},
+        "heat_flux_in": {"source": "q", "unit": "W/m2", "aggregate": aggregate},
     }
     raw["simulator"] = {
         "type": "wall",
@@ -150,12 +151,26 @@ def test_wall_cannot_give_interval_means(tmp_path: Path) -> None:
                 "specific_heat": 1000.0,
             }
         ],
+        "substeps": 4,
     }
     raw["parameters"]["lpd"]["targets"] = ["c.conductivity"]
     raw["parameters"]["lpd"]["unit"] = "W/(m·K)"
     raw["outputs"]["calibrate"] = ["heat_flux_in"]
-    with pytest.raises(ConfigError, match="gives values at the clock instants"):
-        study_from_dict(raw, root=tmp_path)
+    return raw
+
+
+def test_wall_gives_interval_means_not_totals(tmp_path: Path) -> None:
+    # A logger's interval means: the built-in wall is wrapped to average its output.
+    study = study_from_dict(_wall_meter_study(tmp_path, "mean"), root=tmp_path)
+    simulator = build_simulator(study)
+    assert isinstance(simulator, IntervalMeans)
+    assert simulator.means == ("heat_flux_in",)
+    assert simulator.substeps == 4
+    point = study_from_dict(_wall_meter_study(tmp_path, "point"), root=tmp_path)
+    assert not isinstance(build_simulator(point), IntervalMeans)
+    # A total over the interval is an energy, which a flux is not.
+    with pytest.raises(ConfigError, match="'sum' adds up energies"):
+        study_from_dict(_wall_meter_study(tmp_path, "sum"), root=tmp_path)
 
 
 # --------------------------------------------------------------------------- Guideline 14

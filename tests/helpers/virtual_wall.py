@@ -18,7 +18,7 @@ import numpy as np
 
 from bayescal.design import Design, UniformPrior, latin_hypercube
 from bayescal.periods import PeriodLayout, layout_periods
-from bayescal.simulators.base import Forcing
+from bayescal.simulators.base import Forcing, Simulator
 from bayescal.simulators.fvm import Layer
 from bayescal.simulators.wall import MultilayerWall
 
@@ -169,6 +169,8 @@ def virtual_experiment(
     noise_phi: float = 0.0,
     true_wall: MultilayerWall | None = None,
     means: bool = False,
+    logger_substeps: int = 6,
+    model: Simulator | None = None,
 ) -> VirtualExperiment:
     """Simulate the virtual experiment.
 
@@ -193,6 +195,11 @@ def virtual_experiment(
         itself; another wall gives a model-form error the calibration cannot remove).
     means
         Record interval means instead of instantaneous values (:func:`interval_means`).
+    logger_substeps
+        Fine steps per interval of that record.
+    model
+        The calibrated model that makes the design runs (default: :func:`paper_wall`,
+        instantaneous values; an ``IntervalMeans`` of it describes an averaging logger).
     """
     rng = np.random.default_rng(seed)
     truth = dict(PAPER_TRUTH if truth is None else truth)
@@ -201,10 +208,13 @@ def virtual_experiment(
     forcing = Forcing(STEP, bc)
     wall = paper_wall()
     design = latin_hypercube(PRIORS, runs, seed=int(rng.integers(2**31)))
-    sims = np.array([wall.simulate(design.row(k), forcing)["heat_flux_in"] for k in range(runs)])
+    calibrated = wall if model is None else model
+    sims = np.array(
+        [calibrated.simulate(design.row(k), forcing)["heat_flux_in"] for k in range(runs)]
+    )
     measuring = wall if true_wall is None else true_wall
     if means:
-        clean = interval_means(measuring, truth, bc)
+        clean = interval_means(measuring, truth, bc, fine=logger_substeps)
     else:
         clean = measuring.simulate(truth, forcing)["heat_flux_in"]
     if noise_phi:
@@ -231,6 +241,10 @@ def random_truth(rng: np.random.Generator, margin: float = 0.1) -> dict[str, flo
     }
 
 
-def simulate(boundary: dict[str, np.ndarray], parameters: dict[str, float]) -> np.ndarray:
-    """Inside heat flux of the paper wall for ``parameters`` under ``boundary``. [W/m²]"""
-    return paper_wall().simulate(parameters, Forcing(STEP, boundary))["heat_flux_in"]
+def simulate(
+    boundary: dict[str, np.ndarray], parameters: dict[str, float], model: Simulator | None = None
+) -> np.ndarray:
+    """Inside heat flux of the paper wall (or ``model``) for ``parameters`` under
+    ``boundary``. [W/m²]"""
+    wall = paper_wall() if model is None else model
+    return wall.simulate(parameters, Forcing(STEP, boundary))["heat_flux_in"]

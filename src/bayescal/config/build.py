@@ -29,7 +29,12 @@ from bayescal.errors import BayescalError, ConfigError, SimulatorError
 from bayescal.simulators.base import Simulator
 from bayescal.simulators.energyplus_model import energyplus_field_key
 from bayescal.simulators.fvm import Layer
-from bayescal.simulators.wrappers import FixedParameters, SensorModel, TargetedSimulator
+from bayescal.simulators.wrappers import (
+    FixedParameters,
+    IntervalMeans,
+    SensorModel,
+    TargetedSimulator,
+)
 
 __all__ = ["build_simulator", "nominal_parameters"]
 
@@ -324,9 +329,9 @@ def _build_physics(study: Study) -> Simulator:
     """The simulator of the study's ``[simulator]`` section (no sensor model)."""
     section = study.simulator
     if isinstance(section, WallSimulator):
-        return _wall(section, study)
+        return _interval_means(_wall(section, study), section, study)
     if isinstance(section, BoxSimulator):
-        return _box(section, study)
+        return _interval_means(_box(section, study), section, study)
     if isinstance(section, EnergyPlusSection):
         return _energyplus(section, study)
     if isinstance(section, CommandSection):
@@ -334,6 +339,19 @@ def _build_physics(study: Study) -> Simulator:
     if isinstance(section, FmuSection):
         return _fmu(section, study)
     raise ConfigError(f"simulator.type {section.type!r} cannot be built yet")
+
+
+def _interval_means(
+    simulator: Simulator, section: WallSimulator | BoxSimulator, study: Study
+) -> Simulator:
+    """The built-in ``simulator``, its outputs whose data say ``aggregate = "mean"`` averaged."""
+    columns = study.data.columns
+    means = tuple(
+        name
+        for name in (*study.outputs.calibrate, *study.outputs.held_out)
+        if name in columns and columns[name].aggregate == "mean"
+    )
+    return IntervalMeans(simulator, means, section.substeps) if means else simulator
 
 
 def nominal_parameters(study: Study) -> dict[str, float]:

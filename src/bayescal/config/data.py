@@ -67,7 +67,8 @@ class ColumnSpec(Section):
         "are averaged over centred windows), 'mean' (the mean over the interval (t - step, "
         "t] ending at the timestamp) or 'sum' (the total over that interval: a meter; for "
         "energies, J, kWh, Wh, therm...). 'mean' and 'sum' ask the simulator for interval "
-        "values (EnergyPlus sums or averages its time steps).",
+        "values (EnergyPlus sums or averages its time steps; the built-in wall and box "
+        "average over [simulator] substeps fine steps and give no sums).",
         "sum",
         "mean",
         default="point",

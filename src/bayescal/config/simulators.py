@@ -42,7 +42,23 @@ class LayerSpec(Section):
         return value
 
 
-class WallSimulator(SimulatorBase):
+class _BuiltIn(SimulatorBase):
+    """What the built-in simulators (wall and box) share."""
+
+    substeps: int = field_doc(
+        "Fine steps per clock interval over which an output whose data column says "
+        "aggregate = 'mean' is averaged (the simulator runs on a clock this many times "
+        "finer, its boundary conditions interpolated linearly, and gives the mean over "
+        "(t - step, t]; bayescal.simulators.wrappers.IntervalMeans). Used only by such "
+        "outputs; a run then costs about this many times as much. [-]",
+        12,
+        default=6,
+        ge=1,
+        le=1000,
+    )
+
+
+class WallSimulator(_BuiltIn):
     """``type = "wall"``: the built-in wall (:class:`bayescal.simulators.wall.MultilayerWall`)."""
 
     type: Literal["wall"] = field_doc("Simulator type.", "wall")
@@ -154,7 +170,7 @@ _BOX_KINDS |= {"h_out_a": "coefficient", "h_out_b": "wind_coefficient", "ua_leak
 albedo) are [-]."""
 
 
-class BoxSimulator(SimulatorBase):
+class BoxSimulator(_BuiltIn):
     """``type = "box"``: the built-in test box (:class:`bayescal.simulators.box.TestBox`)."""
 
     type: Literal["box"] = field_doc("Simulator type.", "box")

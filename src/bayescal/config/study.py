@@ -519,27 +519,24 @@ def _sensor_problems(study: Study, key: str, unit: str, target: str) -> list[str
 
 
 def _aggregate_problems(study: Study) -> list[str]:
-    """Interval outputs (``aggregate`` 'sum' or 'mean') need a simulator that reports intervals."""
+    """A meter (energy per time step) must be aggregated as a total (``aggregate = 'sum'``).
+
+    The built-in wall and box give interval means of any output (``IntervalMeans``);
+    a total of a power or temperature is refused where the column is read.
+    """
     problems = []
     sim = study.simulator
     outputs = getattr(sim, "outputs", None)
-    for name in study.outputs.calibrate:
+    for name in (*study.outputs.calibrate, *study.outputs.held_out):
         column = study.data.columns.get(name)
         if column is None:
             continue
-        how = column.aggregate
-        if how != "point" and sim.type in ("wall", "box"):
-            problems.append(
-                f"data.columns.{name}.aggregate: the {sim.type} simulator gives values at the "
-                f"clock instants, not {'totals' if how == 'sum' else 'means'} over its "
-                "intervals; use aggregate = 'point' or a simulator that reports intervals "
-                "(energyplus; a command or an FMU that returns interval values)"
-            )
         meter = getattr(outputs.get(name), "meter", None) if isinstance(outputs, dict) else None
-        if meter is not None and how != "sum":
+        if meter is not None and column.aggregate != "sum":
             problems.append(
                 f"data.columns.{name}.aggregate: simulator.outputs.{name} is the meter "
-                f"{meter!r} (energy per time step); set aggregate = 'sum', got {how!r}"
+                f"{meter!r} (energy per time step); set aggregate = 'sum', "
+                f"got {column.aggregate!r}"
             )
     return problems
 

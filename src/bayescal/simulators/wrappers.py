@@ -6,7 +6,9 @@ fixed names (a box constant, a template placeholder) under the study's
 parameter names; :class:`SensorModel` passes outputs through calibrated
 sensors (``reading = gain * simulated + offset``); :class:`FixedParameters`
 holds some parameters at given values (screening candidates at their
-nominal values while the others are calibrated).
+nominal values while the others are calibrated); :class:`IntervalMeans` gives
+some outputs as means over the clock intervals, as a logger that averages
+records them.
 """
 
 from __future__ import annotations
@@ -19,7 +21,7 @@ import numpy as np
 from bayescal.errors import SimulatorError
 from bayescal.simulators.base import Derivable, Forcing, Simulator, check_parameters
 
-__all__ = ["FixedParameters", "SensorModel", "TargetedSimulator"]
+__all__ = ["FixedParameters", "IntervalMeans", "SensorModel", "TargetedSimulator"]
 
 
 @dataclass(frozen=True)
@@ -149,3 +151,88 @@ class FixedParameters(_Wrapped):
     def simulate(self, parameters: Mapping[str, float], forcing: Forcing) -> dict[str, np.ndarray]:
         check_parameters(parameters, self.parameter_names, type(self.inner).__name__)
         return self.inner.simulate({**self.fixed, **parameters}, forcing)
+
+
+@dataclass(frozen=True)
+class IntervalMeans(_Wrapped):
+    """A simulator whose chosen outputs are means over the clock intervals.
+
+    A logger that averages records at the timestamp ``t`` the mean over
+    ``(t - step, t]`` (``[data.columns.<name>] aggregate = "mean"``); a
+    simulator that gives values at the instants lags it by about half a step,
+    which a calibration can only mimic with its parameters (more thermal mass).
+    This wrapper runs ``inner`` on a clock ``substeps`` times finer, its
+    boundary conditions interpolated linearly between the samples, and
+    averages the outputs named in ``means`` over each interval by the
+    trapezoidal rule (the first sample, with no interval before it, keeps the
+    instantaneous value). The other outputs are the fine run's values at the
+    clock instants. A run costs about ``substeps`` times as much.
+
+    Parameters
+    ----------
+    inner
+        The simulator, giving values at the instants.
+    means
+        Outputs returned as interval means.
+    substeps
+        Fine steps per clock interval (>= 1; 1 averages the two end values).
+    """
+
+    means: tuple[str, ...]
+    substeps: int = 6
+
+    def __post_init__(self) -> None:
+        if int(self.substeps) < 1:
+            raise SimulatorError(f"substeps must be >= 1, got {self.substeps!r}")
+        unknown = sorted(set(self.means) - set(self.inner.output_names))
+        if unknown and self.inner.output_names:
+            raise SimulatorError(
+                f"interval means asked of {unknown}, which the simulator does not produce",
+                hint=f"it produces {', '.join(self.inner.output_names)}",
+            )
+
+    @property
+    def parameter_names(self) -> tuple[str, ...]:
+        return self.inner.parameter_names
+
+    def derived(self, parameters: Mapping[str, float]) -> dict[str, float]:
+        """The inner simulator's derived quantities."""
+        return self._inner_derived(parameters)
+
+    def simulate(self, parameters: Mapping[str, float], forcing: Forcing) -> dict[str, np.ndarray]:
+        fine, n = int(self.substeps), forcing.n
+        t_fine = np.arange((n - 1) * fine + 1) / fine
+        series = {
+            name: np.interp(t_fine, np.arange(n), np.asarray(v, dtype=float))
+            for name, v in forcing.series.items()
+        }
+        out = self.inner.simulate(parameters, Forcing(forcing.step / fine, series, forcing.start))
+        result = {}
+        for name, values in out.items():
+            values = np.asarray(values, dtype=float)
+            if name in self.means:
+                result[name] = interval_means(values, fine)
+            else:
+                result[name] = values[::fine].copy()
+        return result
+
+
+def interval_means(fine_values: np.ndarray, substeps: int) -> np.ndarray:
+    """Means over each interval of ``substeps`` fine steps, by the trapezoidal rule.
+
+    ``fine_values`` has ``(n - 1) * substeps + 1`` values; the result has ``n``:
+    the first the instantaneous value, the ``i``-th the mean over the fine
+    values from ``(i - 1) * substeps`` to ``i * substeps``.
+    """
+    v = np.asarray(fine_values, dtype=float)
+    if (v.size - 1) % substeps:
+        raise SimulatorError(
+            f"{v.size} fine values do not make whole intervals of {substeps} steps"
+        )
+    out = np.empty((v.size - 1) // substeps + 1)
+    out[0] = v[0]
+    if out.size > 1:
+        cells = v[1:].reshape(-1, substeps).sum(axis=1) - 0.5 * v[substeps::substeps]
+        cells += 0.5 * v[:-1:substeps]
+        out[1:] = cells / substeps
+    return out
