@@ -16,6 +16,7 @@ from bayescal.data.meters import interval_values
 from bayescal.errors import ConfigError, DataError
 from bayescal.glossary import GLOSSARY, glossary_quantity
 from bayescal.metrics import fit_metrics, meets_guideline14, monthly_metrics
+from bayescal.runner import simulator_fingerprint
 from bayescal.simulators.wrappers import IntervalMeans
 from bayescal.units import dimension_of, to_internal
 
@@ -126,6 +127,15 @@ def test_meter_columns_must_be_totals(tmp_path: Path, column: dict[str, str], ma
         study_from_dict(_meter_study(tmp_path, **column), root=tmp_path)
 
 
+def test_held_out_meter_must_be_a_total(tmp_path: Path) -> None:
+    raw = _meter_study(tmp_path)
+    raw["data"]["columns"]["gas"] = {"source": "G", "unit": "kWh", "aggregate": "mean"}
+    raw["simulator"]["outputs"]["gas"] = {"meter": "NaturalGas:Facility"}
+    raw["outputs"] |= {"held_out": ["gas"], "errors": {"gas": {"sd": "1 kWh"}}}
+    with pytest.raises(ConfigError, match="set aggregate = 'sum', got 'mean'"):
+        study_from_dict(raw, root=tmp_path)
+
+
 def test_sum_of_a_temperature_is_refused(tmp_path: Path) -> None:
     raw = _meter_study(tmp_path)
     raw["data"]["columns"]["temp_air_out"]["aggregate"] = "sum"
@@ -168,6 +178,19 @@ def test_wall_gives_interval_means_not_totals(tmp_path: Path) -> None:
     assert simulator.substeps == 4
     point = study_from_dict(_wall_meter_study(tmp_path, "point"), root=tmp_path)
     assert not isinstance(build_simulator(point), IntervalMeans)
+    # A held-out sensor logged as means is averaged too (names sorted: the order of
+    # the outputs does not change the simulator, nor its stored runs).
+    raw = _wall_meter_study(tmp_path, "mean")
+    raw["simulator"]["outputs"] = ["heat_flux_in", "heat_flux_out"]
+    raw["data"]["columns"]["heat_flux_out"] = {"source": "p", "unit": "W/m2", "aggregate": "mean"}
+    raw["outputs"] |= {"held_out": ["heat_flux_out"], "errors": {"heat_flux_out": {"sd": 0.1}}}
+    both = build_simulator(study_from_dict(raw, root=tmp_path))
+    assert isinstance(both, IntervalMeans)
+    assert both.means == ("heat_flux_in", "heat_flux_out")
+    # The number of fine steps is part of the simulator's fingerprint (stored runs redone).
+    raw["simulator"]["substeps"] = 8
+    finer = build_simulator(study_from_dict(raw, root=tmp_path))
+    assert simulator_fingerprint(finer) != simulator_fingerprint(both)
     # A total over the interval is an energy, which a flux is not.
     with pytest.raises(ConfigError, match="'sum' adds up energies"):
         study_from_dict(_wall_meter_study(tmp_path, "sum"), root=tmp_path)

@@ -1,9 +1,9 @@
 """Interval means of a built-in simulator (``aggregate = "mean"``): IntervalMeans.
 
 References: an output linear in time (its interval mean is the value at the
-interval's midpoint), the virtual wall's own logger (tests/helpers, written
-independently for the validation experiments), and the box run on the fine
-clock and averaged by hand (scipy's trapezoid).
+interval's midpoint), the virtual wall's own logger (tests/helpers: the same
+rule, written as a loop over the intervals for the validation experiments), and
+the box run on the fine clock and averaged by hand (scipy's trapezoid).
 """
 
 from __future__ import annotations
@@ -64,7 +64,7 @@ def test_the_mean_of_a_ramp_is_its_midpoint_value() -> None:
 
 
 def test_wall_means_equal_the_validation_logger() -> None:
-    # tests/helpers/virtual_wall.interval_means is an independent loop over the intervals.
+    # tests/helpers/virtual_wall.interval_means: the same rule as a loop over the intervals.
     bc = surface_temperatures(np.random.default_rng(3), 48 * 3)
     wall = paper_wall()
     got = IntervalMeans(wall, ("heat_flux_in",), substeps=6).simulate(

@@ -347,9 +347,11 @@ def _interval_means(
     """The built-in ``simulator``, its outputs whose data say ``aggregate = "mean"`` averaged."""
     columns = study.data.columns
     means = tuple(
-        name
-        for name in (*study.outputs.calibrate, *study.outputs.held_out)
-        if name in columns and columns[name].aggregate == "mean"
+        sorted(
+            name
+            for name in (*study.outputs.calibrate, *study.outputs.held_out)
+            if name in columns and columns[name].aggregate == "mean"
+        )
     )
     return IntervalMeans(simulator, means, section.substeps) if means else simulator
 

@@ -48,9 +48,12 @@ class _BuiltIn(SimulatorBase):
     substeps: int = field_doc(
         "Fine steps per clock interval over which an output whose data column says "
         "aggregate = 'mean' is averaged (the simulator runs on a clock this many times "
-        "finer, its boundary conditions interpolated linearly, and gives the mean over "
-        "(t - step, t]; bayescal.simulators.wrappers.IntervalMeans). Used only by such "
-        "outputs; a run then costs about this many times as much. [-]",
+        "finer, its boundary conditions interpolated linearly between the samples as "
+        "values at the instants, and gives the mean over (t - step, t]; the first "
+        "sample, with no interval before it, keeps its instantaneous value, so keep it in "
+        "the warm-up; bayescal.simulators.wrappers.IntervalMeans). Used only by such "
+        "outputs; a wall run then costs about this many times as much, a box run less "
+        "where the clock is longer than max_step. [-]",
         12,
         default=6,
         ge=1,
