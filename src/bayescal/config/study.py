@@ -525,8 +525,7 @@ def _aggregate_problems(study: Study) -> list[str]:
     a total of a power or temperature is refused where the column is read.
     """
     problems = []
-    sim = study.simulator
-    outputs = getattr(sim, "outputs", None)
+    outputs = getattr(study.simulator, "outputs", None)
     for name in (*study.outputs.calibrate, *study.outputs.held_out):
         column = study.data.columns.get(name)
         if column is None:

@@ -82,6 +82,16 @@ class Forcing:
     def __getitem__(self, name: str) -> np.ndarray:
         return np.asarray(self.series[name], dtype=float)
 
+    def refined(self, k: int, names: tuple[str, ...] | None = None) -> Forcing:
+        """The forcing on a clock ``k`` times finer (same start), each series
+        interpolated linearly between its samples; only ``names`` (those present)
+        where given."""
+        keep = self.series if names is None else [n for n in names if n in self.series]
+        coarse = np.arange(self.n, dtype=float)
+        fine = np.arange((self.n - 1) * k + 1, dtype=float) / k
+        series = {name: np.interp(fine, coarse, self[name]) for name in keep}
+        return Forcing(self.step / k, series, self.start)
+
 
 @runtime_checkable
 class Simulator(Protocol):

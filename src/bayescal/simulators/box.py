@@ -462,7 +462,7 @@ class TestBox:
             raise SimulatorError(f"TestBox needs at least 2 forcing samples, got {forcing.n}")
         k = _substeps(forcing.step, self.max_step)
         dt = forcing.step / k
-        series = _refine(forcing, k, self.input_names + self.optional_input_names)
+        series = forcing.refined(k, self.input_names + self.optional_input_names).series
         offsets = (np.arange(series["ghi"].size) * dt * 1e9).astype("timedelta64[ns]")
         times = np.asarray(forcing.start, dtype="datetime64[ns]") + offsets
         geo = box_geometry(values, self.window_azimuth, self.sky_air_split)
@@ -540,16 +540,6 @@ def _check_values(values: Mapping[str, float], window_model: str = "transmittanc
 
 def _substeps(step: float, max_step: float) -> int:
     return max(1, int(np.ceil(step / max_step - 1e-9)))
-
-
-def _refine(forcing: Forcing, k: int, names: tuple[str, ...]) -> dict[str, np.ndarray]:
-    """Series at ``k`` evenly spaced instants per forcing step, linearly interpolated."""
-    n_fine = (forcing.n - 1) * k + 1
-    coarse = np.arange(forcing.n, dtype=float)
-    fine = np.arange(n_fine, dtype=float) / k
-    return {
-        name: np.interp(fine, coarse, forcing[name]) for name in names if name in forcing.series
-    }
 
 
 @dataclass(frozen=True)

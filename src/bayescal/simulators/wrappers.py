@@ -200,13 +200,8 @@ class IntervalMeans(_Wrapped):
         return self._inner_derived(parameters)
 
     def simulate(self, parameters: Mapping[str, float], forcing: Forcing) -> dict[str, np.ndarray]:
-        fine, n = int(self.substeps), forcing.n
-        t_fine = np.arange((n - 1) * fine + 1) / fine
-        series = {
-            name: np.interp(t_fine, np.arange(n), np.asarray(v, dtype=float))
-            for name, v in forcing.series.items()
-        }
-        out = self.inner.simulate(parameters, Forcing(forcing.step / fine, series, forcing.start))
+        fine = int(self.substeps)
+        out = self.inner.simulate(parameters, forcing.refined(fine))
         result = {}
         for name, values in out.items():
             values = np.asarray(values, dtype=float)
