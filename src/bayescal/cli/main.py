@@ -267,6 +267,122 @@ def run(
 @main.command()
 @STUDY
 @click.option(
+    "--data",
+    "data",
+    type=click.Path(path_type=Path),
+    required=True,
+    help="The new record: a data file in the study's format and column mapping (its "
+    "boundary conditions required, its measured outputs optional).",
+)
+@click.option(
+    "--from",
+    "start",
+    default=None,
+    metavar="TIME",
+    help="Predict from this instant of the file (local time of the data) [default: its start].",
+)
+@click.option(
+    "--to",
+    "end",
+    default=None,
+    metavar="TIME",
+    help="Predict up to this instant, exclusive [default: the file's end].",
+)
+@click.option(
+    "--set",
+    "assignments",
+    multiple=True,
+    metavar="NAME=VALUE",
+    help="Fix a calibrated parameter at VALUE (physical units, inside its prior) in every "
+    "posterior draw; repeatable.",
+)
+@click.option(
+    "--method",
+    type=click.Choice(["simulator", "emulator"]),
+    default=None,
+    help="Model part of the prediction: the simulator re-run at posterior draws, or the "
+    "emulator (refused where the new conditions lie outside its training range) "
+    "[default: the study's predict.method, the simulator outside the range].",
+)
+@click.option(
+    "--out",
+    type=click.Path(path_type=Path),
+    default=None,
+    help="Folder for the prediction [default: OUTPUT_DIR/predict-<file name>].",
+)
+@simulation_options
+@click.option("--quiet", "-q", is_flag=True, help="No progress bars or notes; errors only.")
+@user_errors
+def predict(
+    study: Path,
+    data: Path,
+    start: str | None,
+    end: str | None,
+    assignments: tuple[str, ...],
+    method: str | None,
+    out: Path | None,
+    jobs: int | None,
+    backend: str | None,
+    scheduler: str | None,
+    quiet: bool,
+) -> None:
+    """Predict a new record with a finished calibration, with its bands.
+
+    The calibrated model is run on the boundary conditions of another data
+    file of the same construction (another season, another house, the rest of
+    a campaign) with the study's whole uncertainty: parameters, noise, the
+    in-likelihood discrepancy kriged at the new conditions and, where the study
+    estimated it, the difference process. Where the file holds measurements,
+    prints and writes the same metrics as the study's test window (RMSE against
+    the nominal model, band coverage with the range an honest band shows).
+    Writes predictions.nc, predictions.csv (mean, 50 % and outer bands per
+    output), metrics.csv, summary.md and a figure per output.
+    """
+    import pandas as pd
+
+    from bayescal.cli.progress import progress_options
+    from bayescal.config import load_study
+    from bayescal.errors import ConfigError
+    from bayescal.pipeline import Options, load_results
+    from bayescal.pipeline.newdata import predict_new, summary_lines, write_new_prediction
+    from bayescal.pipeline.run import writing
+
+    config = load_study(study)
+    window = {}
+    for key, text in (("--from", start), ("--to", end)):
+        if text is not None:
+            try:
+                window[key] = pd.Timestamp(text)
+            except ValueError:
+                raise ConfigError(
+                    f"{key} {text!r} is not a date and time", hint="e.g. 2013-09-20T00:00"
+                ) from None
+    if not data.is_file():
+        raise ConfigError(f"{data}: no such data file", hint="give --data an existing file")
+    folder = out if out is not None else config.study.output_dir / f"predict-{data.stem}"
+    if folder.exists() and not folder.is_dir():
+        raise ConfigError(f"{folder} exists and is not a folder", hint="give --out a folder")
+    options = Options(backend=backend, jobs=jobs, scheduler=scheduler, **progress_options(quiet))
+    pred = predict_new(
+        load_results(config),
+        data,
+        start=window.get("--from"),
+        end=window.get("--to"),
+        fixed=_parse_assignments(assignments),
+        method=method,
+        options=options,
+        say=(lambda _: None) if quiet else click.echo,
+    )
+    with writing(folder):
+        files = write_new_prediction(pred, folder)
+    if not quiet:
+        click.echo("\n".join(summary_lines(pred)))
+    click.echo(f"wrote {folder} ({', '.join(p.name for p in files.values())})")
+
+
+@main.command()
+@STUDY
+@click.option(
     "--apply",
     is_flag=True,
     help="Set screen = false on the proposed parameters and screen = true on the others in "

@@ -407,9 +407,179 @@ def load_measured(study: Study) -> MeasuredData:
         too short for warm-up + one period + test window, or no training period
         left.
     """
-    data = study.data
+    record = _record(study, study.data, optional_outputs=False)
+    frame, step, source = record.frame, record.step, str(study.data.file)
+    outputs = {n: frame[n].to_numpy(dtype=float, copy=True) for n in study.outputs.calibrate}
+    for values in outputs.values():
+        values[record.unusable] = np.nan  # measured, but against invented inputs
+    _check_outputs(outputs, study.data, source)
+    try:
+        layout = layout_for(len(frame), step, study.periods, _missing(outputs, len(frame)))
+    except DataError as exc:  # name the file the record comes from
+        raise DataError(exc.message, hint=exc.hint, source=exc.source or source) from None
+    return record.measured(study, outputs, layout)
+
+
+def load_new_record(
+    study: Study,
+    file: Path,
+    anchor: np.datetime64,
+    *,
+    start: pd.Timestamp | None = None,
+    end: pd.Timestamp | None = None,
+) -> MeasuredData:
+    """Another record read with a study's ``[data]`` mapping: new conditions to predict.
+
+    The file has the study's format, clock step and column names; its
+    boundary conditions must all be there, its measured outputs (calibrated
+    or held out) may be missing (their series are then NaN: a prediction
+    without a check). ``[[data.exclude]]`` and ``data.start``/``end`` of the
+    study are not applied (they name the study's own file); ``start`` and
+    ``end`` cut this one (local time of the data, end exclusive).
+
+    After the study's warm-up the record is laid out as whole periods in
+    the phase of the study's periods (every period starts at the time of
+    day of the study's, ``anchor``), all of them "test" periods: no
+    training period, test window from the first of them to the end of the
+    last whole one (a partial period at the end is cut off).
+
+    Raises
+    ------
+    DataError
+        The file does not exist or lacks a boundary condition, its clock is
+        not in step with the study's, or it is shorter than the warm-up and
+        one period.
+    """
+    path = Path(file).expanduser().resolve()
+    data = study.data.model_copy(update={"file": path, "start": start, "end": end, "exclude": []})
+    source = str(path)
+    present = _file_columns(data)
+    optional = (*study.outputs.calibrate, *study.outputs.held_out)
+    record = _record(study, data, optional_outputs=True, present=present)
+    frame, step = record.frame, record.step
+    period = _samples(study.periods.length, step)
+    warmup = _samples(study.periods.warmup, step)
+    index = pd.DatetimeIndex(frame.index).tz_convert("UTC").tz_localize(None)
+    lag = float((index[0] - pd.Timestamp(anchor)) / step)
+    if abs(lag - round(lag)) > 1e-6:
+        raise DataError(
+            f"the clock of {path.name} is not in step with the study's: its samples fall "
+            f"{format_duration((lag - np.floor(lag)) * step)} after the study's clock instants",
+            hint="give a file on the same clock (data.step from the same instant of the day)",
+            source=source,
+        )
+    first = warmup + (-(round(lag) + warmup)) % period
+    whole = (len(frame) - first) // period
+    if whole < 1:
+        raise DataError(
+            f"{path.name} holds {len(frame)} samples after alignment; it needs the study's "
+            f"warm-up ({warmup} samples) and at least one whole period ({period}) in the "
+            "phase of the study's periods",
+            hint="give a longer record, or a wider --from/--to",
+            source=source,
+        )
+    n_total = first + whole * period
+    record = record.head(n_total)
+    outputs = {}
+    for name in optional:
+        values = (
+            record.frame[name].to_numpy(dtype=float, copy=True)
+            if name in record.frame
+            else np.full(n_total, np.nan)
+        )
+        values[record.unusable] = np.nan
+        outputs[name] = values
+    layout = PeriodLayout(
+        n_total=n_total,
+        period=period,
+        warmup=warmup,
+        test=n_total - first,
+        train_starts=np.zeros(0, dtype=int),
+        dropped_starts=np.zeros(0, dtype=int),
+        test_starts=first + period * np.arange(whole),
+    )
+    return record.measured(study, outputs, layout)
+
+
+def _file_columns(data: DataSection) -> set[str] | None:
+    """The column names of a CSV or Parquet file (``None``: every mapped column is there)."""
+    try:
+        if data.format == "csv":
+            header = pd.read_csv(data.file, sep=data.delimiter, nrows=0)
+            return {str(c).strip() for c in header.columns}
+        if data.format == "parquet":
+            import pyarrow.parquet as pq
+
+            return set(pq.read_schema(data.file).names)
+    except (OSError, ValueError):  # the reader says what is wrong with the file
+        return None
+    return None
+
+
+@dataclass(frozen=True)
+class _Record:
+    """A data file on the study clock, before the outputs and periods are chosen."""
+
+    frame: pd.DataFrame
+    step: pd.Timedelta
+    gaps: tuple[Gap, ...]
+    unusable: np.ndarray
+    zone: tzinfo
+    excluded: tuple[Excluded, ...]
+    source: Path
+
+    def head(self, n: int) -> _Record:
+        """The first ``n`` samples."""
+        return dataclasses.replace(self, frame=self.frame.iloc[:n], unusable=self.unusable[:n])
+
+    def measured(
+        self, study: Study, outputs: dict[str, np.ndarray], layout: PeriodLayout
+    ) -> MeasuredData:
+        """The record as :class:`MeasuredData` with ``outputs`` (calibrated and held out)."""
+        frame = self.frame
+        index = pd.DatetimeIndex(frame.index).tz_convert("UTC").tz_localize(None)
+        times = index.to_numpy().astype("datetime64[s]")
+        forcing = Forcing(
+            step=self.step.total_seconds(),
+            series={n: frame[n].to_numpy(dtype=float) for n in study.boundary_conditions},
+            start=times[0],
+        )
+        calibrate = {n: outputs[n] for n in study.outputs.calibrate}
+        held_out = {
+            n: outputs[n] if n in outputs else frame[n].to_numpy(dtype=float)
+            for n in study.outputs.held_out
+        }
+        return MeasuredData(
+            forcing,
+            calibrate,
+            times,
+            self.step.total_seconds(),
+            self.gaps,
+            layout,
+            self.source,
+            self.zone,
+            held_out,
+            self.excluded,
+        )
+
+
+def _record(
+    study: Study,
+    data: DataSection,
+    *,
+    optional_outputs: bool,
+    present: set[str] | None = None,
+) -> _Record:
+    """Read, convert, exclude, align and bridge ``data`` (a study's or another file's)."""
     source = str(data.file)
-    sources = list(dict.fromkeys(spec.source for spec in data.columns.values()))
+    columns = dict(data.columns)
+    if optional_outputs and present is not None:
+        outputs = set(study.outputs.calibrate) | set(study.outputs.held_out)
+        columns = {
+            n: spec for n, spec in columns.items() if n not in outputs or spec.source in present
+        }
+        data = data.model_copy(update={"columns": columns})
+    sources = list(dict.fromkeys(spec.source for spec in columns.values()))
     raw, zone = _read(data, sources)
     labels = raw.attrs.get("rows")
     step = pd.Timedelta(data.step)
@@ -424,39 +594,11 @@ def load_measured(study: Study) -> MeasuredData:
         labels=labels,
         resample=data.resample,
     )
-    aggregates = {name: spec.aggregate for name, spec in data.columns.items()}
+    aggregates = {name: spec.aggregate for name, spec in columns.items()}
     frame = replace_interval_columns(frame, converted, aggregates, step, source=source)
     frame, gaps = fill_gaps(frame, pd.Timedelta(data.max_gap_interpolate))
     raw_index = pd.DatetimeIndex(raw.index).as_unit("ns")
     gaps = [dataclasses.replace(g, where=_where(g, raw_index, labels, step.value)) for g in gaps]
-    forcing_names = study.boundary_conditions
     periods = (_samples(study.periods.length, step), _samples(study.periods.warmup, step))
-    frame, gaps, unusable = _bridge(frame, forcing_names, gaps, periods)
-    outputs = {n: frame[n].to_numpy(dtype=float, copy=True) for n in study.outputs.calibrate}
-    for values in outputs.values():
-        values[unusable] = np.nan  # measured, but against invented inputs
-    _check_outputs(outputs, data, source)
-    try:
-        layout = layout_for(len(frame), step, study.periods, _missing(outputs, len(frame)))
-    except DataError as exc:  # name the file the record comes from
-        raise DataError(exc.message, hint=exc.hint, source=exc.source or source) from None
-    index = pd.DatetimeIndex(frame.index).tz_convert("UTC").tz_localize(None)
-    times = index.to_numpy().astype("datetime64[s]")
-    forcing = Forcing(
-        step=step.total_seconds(),
-        series={name: frame[name].to_numpy(dtype=float) for name in forcing_names},
-        start=times[0],
-    )
-    held_out = {name: frame[name].to_numpy(dtype=float) for name in study.outputs.held_out}
-    return MeasuredData(
-        forcing,
-        outputs,
-        times,
-        step.total_seconds(),
-        tuple(gaps),
-        layout,
-        Path(source),
-        zone,
-        held_out,
-        excluded,
-    )
+    frame, gaps, unusable = _bridge(frame, study.boundary_conditions, gaps, periods)
+    return _Record(frame, step, tuple(gaps), unusable, zone, excluded, Path(source))

@@ -61,7 +61,7 @@ from bayescal.errors import ConfigError, DataError
 from bayescal.glossary import GLOSSARY
 from bayescal.periods import PeriodLayout
 
-__all__ = ["Assembled", "NoiseSpec", "OutputStack", "assemble", "runs_to_columns"]
+__all__ = ["Assembled", "NoiseSpec", "OutputStack", "assemble", "runs_to_columns", "with_history"]
 
 
 @dataclass(frozen=True)
@@ -304,9 +304,7 @@ def _check_measured(y_star: FloatArray, names: Sequence[str]) -> None:
         )
 
 
-def _with_history(
-    series: dict[str, FloatArray], history: int, period: int
-) -> dict[str, FloatArray]:
+def with_history(series: dict[str, FloatArray], history: int, period: int) -> dict[str, FloatArray]:
     """Add each series delayed by 1..``history`` periods (``<name>_lag<k>``)."""
     if history < 0:
         raise ConfigError(f"history must be >= 0 periods, got {history}")
@@ -397,7 +395,7 @@ def assemble(
     y_star_std = stack.apply({n: layout.cut(v) for n, v in meas.items()})
     _check_measured(y_star_std, names)
     y_test_std = stack.apply({n: layout.cut(v, "test") for n, v in meas.items()})
-    bc = _with_history(
+    bc = with_history(
         {n: _series(boundary, n, n_total, "boundary condition") for n in boundary},
         history,
         layout.period,

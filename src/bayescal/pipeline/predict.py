@@ -334,6 +334,7 @@ def conditioned_discrepancy(
     posterior: Posterior,
     pick: np.ndarray,
     runs: Mapping[str, np.ndarray] | None = None,
+    at: Assembled | None = None,
 ) -> dict[str, tuple[np.ndarray, np.ndarray]]:
     """The in-likelihood discrepancy conditioned on the training residuals, per draw and sample.
 
@@ -357,6 +358,10 @@ def conditioned_discrepancy(
         (``method = "simulator"``: the model is known at theta*, only the
         discrepancy is kriged); ``None``: the emulator is the model, and eta and
         the discrepancy are conditioned together.
+    at
+        Another record to predict on: ``assembled`` with the layout and
+        ``x_test`` of new conditions (:mod:`bayescal.pipeline.newdata`); the
+        training residuals stay the study's. Default: the study's own record.
 
     Returns
     -------
@@ -371,15 +376,16 @@ def conditioned_discrepancy(
     obs = assembled.observations
     if not obs.delta_outputs or not set(obs.names()) <= set(posterior.aux_names):
         return {}
-    layout = assembled.layout
+    target = assembled if at is None else at
+    layout = target.layout
     t = len(posterior.names)
     unit = posterior.unit_draws.reshape(-1, t)[pick]
     aux = np.asarray(posterior.aux, dtype=float).reshape(-1, len(posterior.aux_names))[pick]
-    parts = _predicted_parts(assembled)
+    parts = _predicted_parts(target)
     x_new = np.vstack([x for x, _, _ in parts])
     m = assembled.n_periods
     x_all = np.vstack([assembled.x, x_new])
-    beyond = assembled.out_of_basis_excess()
+    beyond = target.out_of_basis_excess()
     out = {}
     for q in obs.delta_outputs:
         noise = obs.outputs[q]
@@ -396,9 +402,8 @@ def conditioned_discrepancy(
             values = dict(zip(posterior.aux_names, aux[s], strict=True))
             phi = float(values[obs.coordinate("phi", q)]) if q in obs.ar_outputs else 0.0
             if runs is not None:
-                y_sim = (layout.cut(np.asarray(runs[name][s], float)) - st.mean[:, None]) / st.sd[
-                    :, None
-                ]
+                y_sim = assembled.layout.cut(np.asarray(runs[name][s], float))
+                y_sim = (y_sim - st.mean[:, None]) / st.sd[:, None]
                 shift, cov = field.condition(values, obs.weights_of(q, y_sim, phi))
                 w_new, extra = shift, np.zeros_like(excess)
                 offset = np.zeros(ko.shape[0])
@@ -411,12 +416,12 @@ def conditioned_discrepancy(
                 offset = st.mean
             mu = offset[:, None] + st.sd[:, None] * (ko @ w_new.T)  # (n_o, P)
             v = st.sd[:, None] ** 2 * (np.einsum("nj,ajk,nk->na", ko, cov, ko) + extra)
-            at = 0
-            for _, starts, begin in parts:
-                cols = slice(at, at + len(starts))
+            col = 0  # a part's rows of x (the training periods of another record: none placed)
+            for x, starts, begin in parts:
+                cols = slice(col, col + len(starts))
                 _place(layout, starts, mu[:, cols], mean[s], begin)
                 _place(layout, starts, v[:, cols], var[s], begin)
-                at += len(starts)
+                col += x.shape[0]
         out[name] = (mean, var)
     return out
 

@@ -58,7 +58,7 @@ __all__ = [
 DPI = 100
 MAX_POINTS = 20_000  # scatter points drawn per panel (evenly thinned beyond)
 COLOURS = {"measured": "black", "nominal": "0.45", "model": "tab:red", "disc": "tab:blue"}
-WINDOW_TITLES = {"train": "training window", "test": "test window"}
+WINDOW_TITLES = {"train": "training window", "test": "test window", "new": "new conditions"}
 FloatArray = NDArray[np.float64]
 
 
