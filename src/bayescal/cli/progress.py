@@ -151,9 +151,34 @@ def metrics_text(train: Mapping[str, Metrics], test: Mapping[str, Metrics]) -> s
     return "\n".join(rows)
 
 
+def _first_screen(res: Results) -> list[str]:
+    """What ``describe`` says first: whether the calibration helped (the report's top box).
+
+    The parameters leaning on a prior bound and the outputs whose calibrated
+    prediction is worse than the nominal out of sample (loud), then one line per
+    output: calibrated against nominal RMSE out of sample
+    (:mod:`bayescal.report.trust`).
+    """
+    from bayescal.report.trust import catalogue_verdicts, held_out_outputs, trust_warnings
+
+    metrics = None
+    held: tuple[str, ...] = ()
+    if res.predictions is not None:
+        metrics = res.predictions.metrics
+        held = held_out_outputs(dict(res.predictions.dataset.attrs))
+    disc = res.discrepancy.posterior if res.discrepancy is not None else None
+    lines = [f"WARNING: {w}" for w in trust_warnings(res.posterior, disc, metrics, held)]
+    if metrics is not None:
+        lines += ["", "out of sample, calibrated against nominal (catalogue) parameters:"]
+        lines += [f"  {v.line()}" for v in catalogue_verdicts(metrics, held)]
+    return ["", *lines] if lines else []
+
+
 def describe(res: Results) -> str:
-    """A terminal summary: posterior table, diagnostics, metrics, and what is not there yet."""
-    lines = [f"study {res.context.study.study.name!r} -> {res.context.out}"]
+    """A terminal summary: whether the calibration helped (first), posterior table,
+    diagnostics, metrics, and what is not there yet."""
+    first = _first_screen(res)
+    lines = [f"study {res.context.study.study.name!r} -> {res.context.out}", *first]
     if res.posterior is not None:
         table = res.posterior.summary()
         lines += ["", "posterior (physical units):", table.to_string(float_format="{:.5g}".format)]
@@ -215,6 +240,9 @@ def describe(res: Results) -> str:
     if res.simulations is not None and res.simulations.failures:
         lines += ["", f"{len(res.simulations.failures)} failed run(s):"]
         lines += [f"  run {f.index}: {f.error_type}: {f.message}" for f in res.simulations.failures]
+    loud = sum(line.startswith("WARNING: ") for line in first)
+    if loud:
+        lines += ["", f"{loud} warning(s) at the top of this summary (WARNING: ...)"]
     missing = res.missing()
     if missing:
         lines += [
