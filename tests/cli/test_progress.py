@@ -120,3 +120,28 @@ def test_describe_says_first_when_the_calibration_did_not_help(tmp_path: Path) -
     assert "WARNING" not in calm
     assert "warning(s) at the top" not in calm
     assert "  flux (test window): no better: calibrated RMSE 0.98" in calm
+
+
+def test_comparison_table_marks_a_variant_whose_calibration_failed() -> None:
+    import pandas as pd
+
+    from bayescal.cli.progress import comparison_text
+
+    table = pd.DataFrame(
+        {
+            "rank": [1, 2], "variant": ["ar1", "white"], "elpd": [-10.0, -30.0],
+            "se": [1.0, 1.0], "elpd_diff": [0.0, 20.0], "se_diff": [0.0, 2.0],
+            "p_loo": [3.0, 4.0], "k_high": [0, 0], "refits": [0, 0], "periods": [6, 6],
+            "diagnostics": ["failed", "passed"],
+        }
+    )  # fmt: skip
+    lines = comparison_text(table, ["ar1: its calibration FAILED ..."], {}).splitlines()
+    assert lines[1].endswith("  MCMC")
+    assert lines[2].endswith("  FAILED !")
+    assert lines[3].endswith("  ok")
+    assert (
+        "ar1: best; its calibration FAILED its MCMC diagnostics: the rank is not reliable"
+        in (lines)[5]
+    )
+    assert lines[6].startswith("white: worse by 20.0")
+    assert "note: ar1: its calibration FAILED ..." in lines

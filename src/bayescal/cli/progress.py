@@ -325,12 +325,17 @@ def _band(row: Any, column: str) -> str:
 
 def comparison_text(table: Any, notes: Sequence[str], files: Mapping[str, Any]) -> str:
     """The ranking of ``bayescal compare``: table, verdicts, notes and the files written."""
-    from bayescal.report.compare import SMALL_DIFFERENCE, verdict
+    from bayescal.report.compare import (
+        SMALL_DIFFERENCE,
+        diagnostics_mark,
+        failed_diagnostics,
+        verdict,
+    )
 
     width = max(20, 1 + max(len(str(v)) for v in table["variant"]))
     head = (
         f"{'rank':>4}  {'variant':<{width}}{'ELPD':>11}{'SE':>8}{'diff':>10}{'SE diff':>9}"
-        f"{'p_loo':>8}{'k>0.7':>7}{'refits':>7}{'band95':>14}{'band50':>14}"
+        f"{'p_loo':>8}{'k>0.7':>7}{'refits':>7}{'band95':>14}{'band50':>14}  MCMC"
     )
     lines = [
         f"leave-one-period-out ELPD over {int(table['periods'].iloc[0])} training periods "
@@ -343,16 +348,19 @@ def comparison_text(table: Any, notes: Sequence[str], files: Mapping[str, Any]) 
             f"{r['elpd_diff']:>10.1f}{r['se_diff']:>9.1f}{r['p_loo']:>8.1f}"
             f"{int(r['k_high']):>7}{int(r['refits']):>7}"
             f"{_band(r, 'loo_band95'):>14}{_band(r, 'loo_band50'):>14}"
+            f"  {'FAILED !' if failed_diagnostics(r) else 'ok'}"
         )
     lines.append("")
     lines += [
-        f"{r['variant']}: {verdict(r['elpd_diff'], r['se_diff'])}" for _, r in table.iterrows()
+        f"{r['variant']}: {verdict(r['elpd_diff'], r['se_diff'])}{diagnostics_mark(r)}"
+        for _, r in table.iterrows()
     ]
     lines.append(
         f"(a difference counts when it exceeds {SMALL_DIFFERENCE:g} nats and twice its SE; "
         "band95/band50: share of the training samples inside the 95 %/50 % band of their "
         "period left out, ± its SE over the periods; the ranking is by ELPD, the bands are "
-        "a check; the test window was not read)"
+        "a check; MCMC: the calibration's R-hat and ESS checks, FAILED: its rank is not "
+        "reliable; the test window was not read)"
     )
     lines += [f"note: {n}" for n in notes]
     lines += [f"wrote {path}" for path in files.values()]
