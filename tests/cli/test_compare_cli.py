@@ -48,6 +48,9 @@ def test_ar1_errors_win_on_ar1_noise(ranked: tuple[Result, Path]) -> None:
     assert other["elpd_diff"] > 2.0 * other["se_diff"] > 0.0
     assert other["error_model"] == "heat_flux_in white"
     assert (table["refits"] <= 1).all()
+    # whether each calibration passed its MCMC diagnostics, a column of its own
+    assert set(table["diagnostics"]) <= {"passed", "failed"}
+    assert ((table["diagnostics"] == "failed") == (table["diagnostic_warnings"] > 0)).all()
     assert (table["psis_only"] == table["k_high"] - table["refits"]).all()
     periods = pd.read_csv(out / "compare-periods.csv")
     assert len(periods) == 2 * int(best["periods"]) == 12
@@ -65,10 +68,15 @@ def test_ar1_errors_win_on_ar1_noise(ranked: tuple[Result, Path]) -> None:
         assert row["loo_band95_worst"] == pytest.approx(group["band95_i"].min())
     assert (out / "compare.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     summary = (out / "compare.md").read_text(encoding="utf-8")
-    assert "| 1 | ar1 |" in summary
+    # the fixture's short chains may fail their diagnostics: then the name is marked
+    mark = "**ar1** ⚠" if best["diagnostics"] == "failed" else "ar1"
+    assert f"| 1 | {mark} |" in summary
     assert "The test window is read by none of it" in summary
     text = result.output
     assert "ar1: best" in text
+    for _, row in table.iterrows():
+        line = next(x for x in text.splitlines() if f" {row['variant']} " in f" {x} ")
+        assert line.endswith("FAILED !" if row["diagnostics"] == "failed" else "  ok")
     assert f"{best['loo_band95']:.3f}±{best['loo_band95_se']:.3f}" in text
     assert "white: worse by" in text
     assert f"wrote {out / 'compare.csv'}" in text
@@ -86,6 +94,54 @@ def test_a_second_comparison_reuses_the_scores(
     assert "white: leave-period-out scores up to date, reused" in result.output
     again = pd.read_csv(root / "again" / "compare.csv")
     np.testing.assert_array_equal(again["elpd"], first["elpd"])
+
+
+def test_a_variant_whose_calibration_failed_is_marked_not_ranked_silently(
+    variants: tuple[Path, Path, Path],
+    ranked: tuple[Result, Path],
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """The white variant's chains made to fail their diagnostics (the stages and scores
+    are reused): compare.csv flags it, the printed table and compare.md mark it and a
+    note says why its rank is not reliable."""
+    import dataclasses
+
+    from bayescal.pipeline import compare as compare_module
+
+    root, white, ar1 = variants
+    calibrated = compare_module._calibrated
+    failed = ("k_cb: R-hat 1.05 > 1.01", "cp_cb: bulk ESS 80 < 400")
+
+    def shaky(label: str, *args: object) -> object:
+        res = calibrated(label, *args)  # type: ignore[arg-type]
+        if label != "white" or res.posterior is None:
+            return res
+        diag = dataclasses.replace(res.posterior.diagnostics, warnings=failed)
+        post = dataclasses.replace(res.posterior, diagnostics=diag)
+        return dataclasses.replace(res, posterior=post)
+
+    monkeypatch.setattr(compare_module, "_calibrated", shaky)
+    out = root / "shaky"
+    args = ["compare", str(ar1), str(white), "--output", str(out), "--draws", "60"]
+    result = CliRunner().invoke(main, [*args, "--max-refits", "1", "--quiet"])
+    assert result.exit_code == 0, result.output
+    table = pd.read_csv(out / "compare.csv").set_index("variant")
+    assert table.loc["white", "diagnostics"] == "failed"
+    assert table.loc["white", "diagnostic_warnings"] == 2
+    first = pd.read_csv(ranked[1] / "compare.csv").set_index("variant")
+    assert table.loc["white", "elpd"] == first.loc["white", "elpd"]  # scores unchanged
+    row = next(line for line in result.output.splitlines() if " white " in f" {line} ")
+    assert row.endswith("FAILED !")
+    assert "white: worse by" in result.output
+    assert "its calibration FAILED its MCMC diagnostics: the rank is not reliable" in (
+        result.output
+    )
+    assert "note: white: its calibration FAILED its MCMC diagnostics (k_cb: R-hat 1.05" in (
+        result.output
+    )
+    summary = (out / "compare.md").read_text(encoding="utf-8")
+    assert "| **white** ⚠ |" in summary
+    assert "- white: its calibration FAILED its MCMC diagnostics" in summary
 
 
 def _one_line_error(result: Result, *needles: str) -> None:

@@ -10,6 +10,7 @@ import pytest
 import sims_for_tests as sims
 from bayescal.cli.progress import simulation_bar
 from bayescal.design import UniformPrior, latin_hypercube
+from bayescal.pipeline import Results
 from bayescal.runner import run_design
 from bayescal.simulators.base import Forcing
 
@@ -56,3 +57,91 @@ def test_comparison_table_keeps_long_variant_names_apart() -> None:
     rows = comparison_text(table, [], {}).splitlines()[2:4]
     assert rows[0].split()[1] == names[0]
     assert rows[1].split()[1] == names[1]
+
+
+def _made_up_results(tmp_path: Path, piled: bool, calibrated_test_rmse: float) -> Results:
+    """Results of the wall example with a made-up posterior and metrics table: no MCMC."""
+    import pandas as pd
+    import xarray as xr
+
+    from bayescal.calibration.posterior import Posterior
+    from bayescal.config import load_study
+    from bayescal.examples import copy_example
+    from bayescal.pipeline.stages import Predictions, prepare
+
+    ctx = prepare(load_study(copy_example("wall", tmp_path / "wall")))
+    rng = np.random.default_rng(0)
+    priors = {"k": UniformPrior(0.1, 0.3, unit="W/(m·K)"), "c": UniformPrior(1.0, 2.0)}
+    unit = rng.random((4, 200, 2))
+    if piled:
+        unit[..., 0] = 1.0 - np.abs(rng.normal(0.0, 0.03, (4, 200)))
+    lam = rng.gamma(5.0, 1.0, (4, 200, 2))
+    post = Posterior.build(
+        ["k", "c"], priors, unit, lam=lam[..., 0], lam_star=lam[..., 1],
+        acceptance=np.full((4, 4), 0.3),
+    )  # fmt: skip
+    rows = [
+        (o, model, window, rmse)
+        for o, test_rmse in (("flux", calibrated_test_rmse), ("sensor", 0.9))
+        for model, window, rmse in (
+            ("nominal", "train", 2.0), ("calibrated", "train", 0.5),
+            ("nominal", "test", 1.0), ("calibrated", "test", test_rmse),
+        )
+    ]  # fmt: skip
+    metrics = pd.DataFrame(rows, columns=["output", "model", "window", "rmse"])
+    metrics["n"], metrics["mse"] = 48, metrics["rmse"] ** 2
+    ds = xr.Dataset(attrs={"held_out": "sensor", "outputs": "flux,sensor"})
+    return Results(ctx, posterior=post, predictions=Predictions(ds, metrics))
+
+
+def test_describe_says_first_when_the_calibration_did_not_help(tmp_path: Path) -> None:
+    from bayescal.cli.progress import describe
+
+    text = describe(_made_up_results(tmp_path, piled=True, calibrated_test_rmse=1.2))
+    lines = text.splitlines()
+    posterior = lines.index("posterior (physical units):")
+    loud = [k for k, line in enumerate(lines) if line.startswith("WARNING: ")]
+    assert len(loud) == 2
+    assert max(loud) < posterior
+    assert lines[loud[0]].startswith("WARNING: calibration: k leans on the upper bound")
+    assert "treat it as a fitting constant" in lines[loud[0]]
+    assert lines[loud[1]].startswith("WARNING: flux: the calibrated prediction is worse")
+    assert lines[loud[1]].endswith("treat them as fitting constants, not properties")
+    # one line per output, calibrated and held out, before the posterior table
+    head = "out of sample, calibrated against nominal (catalogue) parameters:"
+    at = lines.index(head)
+    assert lines[at + 1].startswith("  flux (test window): worse: calibrated RMSE 1.2")
+    # the held-out sensor: pooled over its whole record, 0.5 and 0.9 against 2 and 1
+    assert lines[at + 2].startswith("  sensor (held-out sensor, whole record): better")
+    assert at < posterior
+    assert "2 warning(s) at the top of this summary" in text
+
+    calm = describe(_made_up_results(tmp_path / "calm", piled=False, calibrated_test_rmse=0.98))
+    assert "WARNING" not in calm
+    assert "warning(s) at the top" not in calm
+    assert "  flux (test window): no better: calibrated RMSE 0.98" in calm
+
+
+def test_comparison_table_marks_a_variant_whose_calibration_failed() -> None:
+    import pandas as pd
+
+    from bayescal.cli.progress import comparison_text
+
+    table = pd.DataFrame(
+        {
+            "rank": [1, 2], "variant": ["ar1", "white"], "elpd": [-10.0, -30.0],
+            "se": [1.0, 1.0], "elpd_diff": [0.0, 20.0], "se_diff": [0.0, 2.0],
+            "p_loo": [3.0, 4.0], "k_high": [0, 0], "refits": [0, 0], "periods": [6, 6],
+            "diagnostics": ["failed", "passed"],
+        }
+    )  # fmt: skip
+    lines = comparison_text(table, ["ar1: its calibration FAILED ..."], {}).splitlines()
+    assert lines[1].endswith("  MCMC")
+    assert lines[2].endswith("  FAILED !")
+    assert lines[3].endswith("  ok")
+    assert (
+        "ar1: best; its calibration FAILED its MCMC diagnostics: the rank is not reliable"
+        in (lines)[5]
+    )
+    assert lines[6].startswith("white: worse by 20.0")
+    assert "note: ar1: its calibration FAILED ..." in lines

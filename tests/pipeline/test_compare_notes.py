@@ -1,12 +1,18 @@
-"""What ``bayescal compare`` notes beside the ELPD: left-out bands off their rate, and
-periods predicted confidently wrong."""
+"""What ``bayescal compare`` notes beside the ELPD: left-out bands off their rate,
+periods predicted confidently wrong, and variants whose calibration failed its MCMC
+diagnostics."""
 
 from __future__ import annotations
 
+from typing import cast
+
 import numpy as np
+import pandas as pd
 
 from bayescal.calibration.cv import PeriodScores
-from bayescal.pipeline.compare import _band_notes
+from bayescal.config import Study
+from bayescal.pipeline.compare import Variant, _band_notes, _notes
+from bayescal.report.compare import comparison_markdown
 
 
 def _scores(pit: np.ndarray) -> PeriodScores:
@@ -40,3 +46,45 @@ def test_wide_narrow_and_confidently_wrong() -> None:
         "3 (0%), 7 (0%): confidently wrong there"
     )
     assert not any("wider" in n for n in notes)
+
+
+def _table(diagnostics: list[str]) -> pd.DataFrame:
+    """A ranking of two variants, the second's calibration as given."""
+    return pd.DataFrame(
+        {
+            "rank": [1, 2], "variant": ["ar1", "white"], "elpd": [-10.0, -30.0],
+            "se": [1.0, 1.0], "elpd_diff": [0.0, 20.0], "se_diff": [0.0, 2.0],
+            "p_loo": [3.0, 4.0], "k_high": [0, 0], "refits": [0, 0], "periods": [6, 6],
+            "diagnostics": diagnostics, "diagnostic_warnings": [0, 2],
+        }
+    )  # fmt: skip
+
+
+def test_a_variant_whose_calibration_failed_is_noted_first() -> None:
+    pit = np.tile((np.arange(200)[:, None] + 0.5) / 200, (1, 12))
+    failed = ("k_cb: R-hat 1.05 > 1.01", "k_cb: bulk ESS 80 < 400")
+    variants = [
+        Variant("ok", cast(Study, None), _scores(pit)),
+        Variant("shaky", cast(Study, None), _scores(pit), diagnostics=failed),
+    ]
+    notes = _notes(variants, max_refits=0)
+    assert notes == [
+        "shaky: its calibration FAILED its MCMC diagnostics (k_cb: R-hat 1.05 > 1.01 and 1 "
+        "more): its scores and rank rest on chains that have not converged; run longer "
+        "chains ([calibration] burn, samples, max_samples) before choosing it"
+    ]
+
+
+def test_the_summary_page_marks_a_failed_variant() -> None:
+    page = comparison_markdown(_table(["passed", "failed"]), pd.DataFrame(), ["a note"], None)
+    head = next(line for line in page.splitlines() if line.startswith("| rank"))
+    assert head.endswith("| MCMC diagnostics |")
+    assert "| 1 | ar1 |" in page
+    white = next(line for line in page.splitlines() if line.startswith("| 2 |"))
+    assert white.startswith("| 2 | **white** ⚠ |")
+    assert white.endswith("| **FAILED** |")
+    assert "- **ar1**: best\n" in page
+    assert "- **white**: worse by 20.0 ± 2.0 (10.0 SE); its calibration FAILED its MCMC" in page
+    calm = comparison_markdown(_table(["passed", "passed"]), pd.DataFrame(), [], None)
+    assert "FAILED" not in calm
+    assert "| 2 | white |" in calm

@@ -352,3 +352,52 @@ def test_settings_say_how_far_the_calibration_may_be_extended(tmp_path: Path) ->
     ctx = prepare(load_study(folder))
     shown = report_settings(ctx.study, ctx.measured.layout)["calibration MCMC"]
     assert str(shown).endswith(f"({cal.burn} + {cal.samples})")
+
+
+def test_the_first_screen_says_when_the_calibration_did_not_help(
+    parts: Parts, tmp_path: Path
+) -> None:
+    """A parameter piled at its upper bound and a calibrated prediction worse than the
+    nominal on the test window: both are warnings above the first table, and one line per
+    output compares the two predictions out of sample."""
+    from bayescal.report.study import write_study_report
+
+    ctx = prepare(load_study(copy_example("wall", tmp_path / "wall")))
+    unit = parts.post.unit_draws.copy()
+    unit[..., 0] = 1.0 - np.abs(np.random.default_rng(0).normal(0.0, 0.03, unit.shape[:2]))
+    piled = dataclasses.replace(parts.post, unit_draws=unit)
+    metrics = metrics_table(parts.ds_plain)
+    test = metrics["window"] == "test"
+    nominal = float(metrics.loc[test & (metrics["model"] == "nominal"), "rmse"].iloc[0])
+    metrics.loc[test & (metrics["model"] == "calibrated"), "rmse"] = 1.5 * nominal
+
+    def page(posterior: Posterior, table: pd.DataFrame, name: str) -> str:
+        path = write_study_report(
+            ctx.study,
+            ctx.measured.layout,
+            tmp_path / name,
+            design=parts.ve.design,
+            failures=(),
+            emulator=parts.em,
+            loo=parts.loo,
+            posterior=posterior,
+            discrepancy=None,
+            predictions=parts.ds_plain,
+            metrics=table,
+        )
+        return html.unescape(path.read_text(encoding="utf-8"))
+
+    text = page(piled, metrics, "bad")
+    first_table = text.index("<table")
+    name = parts.post.names[0]
+    lean = text.index(f"calibration: {name} leans on the upper bound of its prior")
+    worse = text.index("heat_flux_in: the calibrated prediction is worse than the nominal")
+    verdict = text.index("heat_flux_in (test window): worse: calibrated RMSE")
+    assert max(lean, worse, verdict) < first_table
+    assert "treat it as a fitting constant" in text[lean:first_table]
+    assert "treat them as fitting constants, not properties" in text[worse:first_table]
+    assert "No warnings" not in text
+    # the calibration as it came out: nothing piled at a bound, the table as computed
+    plain = page(parts.post, metrics_table(parts.ds_plain), "plain")
+    assert "leans on" not in plain
+    assert "heat_flux_in (test window): " in plain[: plain.index("<table")]

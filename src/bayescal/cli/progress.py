@@ -151,9 +151,34 @@ def metrics_text(train: Mapping[str, Metrics], test: Mapping[str, Metrics]) -> s
     return "\n".join(rows)
 
 
+def _first_screen(res: Results) -> list[str]:
+    """What ``describe`` says first: whether the calibration helped (the report's top box).
+
+    The parameters leaning on a prior bound and the outputs whose calibrated
+    prediction is worse than the nominal out of sample (loud), then one line per
+    output: calibrated against nominal RMSE out of sample
+    (:mod:`bayescal.report.trust`).
+    """
+    from bayescal.report.trust import catalogue_verdicts, held_out_outputs, trust_warnings
+
+    metrics = None
+    held: tuple[str, ...] = ()
+    if res.predictions is not None:
+        metrics = res.predictions.metrics
+        held = held_out_outputs(dict(res.predictions.dataset.attrs))
+    disc = res.discrepancy.posterior if res.discrepancy is not None else None
+    lines = [f"WARNING: {w}" for w in trust_warnings(res.posterior, disc, metrics, held)]
+    if metrics is not None:
+        lines += ["", "out of sample, calibrated against nominal (catalogue) parameters:"]
+        lines += [f"  {v.line()}" for v in catalogue_verdicts(metrics, held)]
+    return ["", *lines] if lines else []
+
+
 def describe(res: Results) -> str:
-    """A terminal summary: posterior table, diagnostics, metrics, and what is not there yet."""
-    lines = [f"study {res.context.study.study.name!r} -> {res.context.out}"]
+    """A terminal summary: whether the calibration helped (first), posterior table,
+    diagnostics, metrics, and what is not there yet."""
+    first = _first_screen(res)
+    lines = [f"study {res.context.study.study.name!r} -> {res.context.out}", *first]
     if res.posterior is not None:
         table = res.posterior.summary()
         lines += ["", "posterior (physical units):", table.to_string(float_format="{:.5g}".format)]
@@ -215,6 +240,9 @@ def describe(res: Results) -> str:
     if res.simulations is not None and res.simulations.failures:
         lines += ["", f"{len(res.simulations.failures)} failed run(s):"]
         lines += [f"  run {f.index}: {f.error_type}: {f.message}" for f in res.simulations.failures]
+    loud = sum(line.startswith("WARNING: ") for line in first)
+    if loud:
+        lines += ["", f"{loud} warning(s) at the top of this summary (WARNING: ...)"]
     missing = res.missing()
     if missing:
         lines += [
@@ -297,12 +325,17 @@ def _band(row: Any, column: str) -> str:
 
 def comparison_text(table: Any, notes: Sequence[str], files: Mapping[str, Any]) -> str:
     """The ranking of ``bayescal compare``: table, verdicts, notes and the files written."""
-    from bayescal.report.compare import SMALL_DIFFERENCE, verdict
+    from bayescal.report.compare import (
+        SMALL_DIFFERENCE,
+        diagnostics_mark,
+        failed_diagnostics,
+        verdict,
+    )
 
     width = max(20, 1 + max(len(str(v)) for v in table["variant"]))
     head = (
         f"{'rank':>4}  {'variant':<{width}}{'ELPD':>11}{'SE':>8}{'diff':>10}{'SE diff':>9}"
-        f"{'p_loo':>8}{'k>0.7':>7}{'refits':>7}{'band95':>14}{'band50':>14}"
+        f"{'p_loo':>8}{'k>0.7':>7}{'refits':>7}{'band95':>14}{'band50':>14}  MCMC"
     )
     lines = [
         f"leave-one-period-out ELPD over {int(table['periods'].iloc[0])} training periods "
@@ -315,16 +348,19 @@ def comparison_text(table: Any, notes: Sequence[str], files: Mapping[str, Any]) 
             f"{r['elpd_diff']:>10.1f}{r['se_diff']:>9.1f}{r['p_loo']:>8.1f}"
             f"{int(r['k_high']):>7}{int(r['refits']):>7}"
             f"{_band(r, 'loo_band95'):>14}{_band(r, 'loo_band50'):>14}"
+            f"  {'FAILED !' if failed_diagnostics(r) else 'ok'}"
         )
     lines.append("")
     lines += [
-        f"{r['variant']}: {verdict(r['elpd_diff'], r['se_diff'])}" for _, r in table.iterrows()
+        f"{r['variant']}: {verdict(r['elpd_diff'], r['se_diff'])}{diagnostics_mark(r)}"
+        for _, r in table.iterrows()
     ]
     lines.append(
         f"(a difference counts when it exceeds {SMALL_DIFFERENCE:g} nats and twice its SE; "
         "band95/band50: share of the training samples inside the 95 %/50 % band of their "
         "period left out, ± its SE over the periods; the ranking is by ELPD, the bands are "
-        "a check; the test window was not read)"
+        "a check; MCMC: the calibration's R-hat and ESS checks, FAILED: its rank is not "
+        "reliable; the test window was not read)"
     )
     lines += [f"note: {n}" for n in notes]
     lines += [f"wrote {path}" for path in files.values()]

@@ -20,7 +20,8 @@ discrepancy on or off, another standardisation). :func:`compare`
    standard error from the paired periods, beside the left-out bands with
    their standard errors (the period as the unit), notes where a band misses
    its rate by more than two of them or a period is predicted confidently
-   wrong, and writes into ``output``:
+   wrong or a variant's calibration failed its MCMC diagnostics (marked in
+   every table, never ranked silently), and writes into ``output``:
    ``compare.csv`` (the ranking), ``compare-periods.csv`` (every period of
    every variant), ``compare.png`` (:func:`bayescal.report.compare.plot_comparison`)
    and ``compare.md`` (a summary page).
@@ -95,12 +96,17 @@ class Variant:
     settings
         ``parameters``, ``priors``, ``error_model``, ``standardise``: what
         tells the variants apart, in words.
+    diagnostics
+        The MCMC diagnostics its calibration failed (R-hat, ESS, stuck chains,
+        divergences; empty where every one passed): its scores rest on those
+        chains, so the tables mark it.
     """
 
     label: str
     study: Study
     scores: PeriodScores
     settings: dict[str, str] = field(default_factory=dict)
+    diagnostics: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -333,6 +339,8 @@ def _tables(variants: Sequence[Variant], times: list[str]) -> tuple[pd.DataFrame
                 "loo_band50": s.band_coverage(0.50),
                 "loo_band50_se": s.band_coverage_se(0.50),
                 "loo_band95_worst": _worst(s.band_shares(0.95)),
+                "diagnostics": "failed" if v.diagnostics else "passed",
+                "diagnostic_warnings": len(v.diagnostics),
                 **v.settings,
                 "study": str(v.study.path),
             }
@@ -395,10 +403,23 @@ def _band_notes(label: str, s: PeriodScores) -> list[str]:
     return notes
 
 
+def _diagnostics_note(v: Variant) -> list[str]:
+    """One loud line for a variant whose calibration failed its MCMC diagnostics."""
+    if not v.diagnostics:
+        return []
+    more = f" and {len(v.diagnostics) - 1} more" if len(v.diagnostics) > 1 else ""
+    return [
+        f"{v.label}: its calibration FAILED its MCMC diagnostics ({v.diagnostics[0]}{more}): "
+        "its scores and rank rest on chains that have not converged; run longer chains "
+        "([calibration] burn, samples, max_samples) before choosing it"
+    ]
+
+
 def _notes(variants: Sequence[Variant], max_refits: int) -> list[str]:
     notes = []
     for v in variants:
         s = v.scores
+        notes += _diagnostics_note(v)
         notes += _band_notes(v.label, s)
         shaky = np.flatnonzero(s.psis_only)
         if s.refitted.any():
@@ -480,7 +501,8 @@ def compare(
             f"({int(np.sum(scores.high_k))} with Pareto k > 0.7, {int(np.sum(scores.refitted))} "
             "refitted)"
         )
-        variants.append(Variant(label, study, scores, _settings(study)))
+        failed = res.posterior.warnings if res.posterior is not None else ()
+        variants.append(Variant(label, study, scores, _settings(study), tuple(failed)))
     first = contexts[0][1].measured
     times = [_when(first.times, int(s)) for s in first.layout.train_starts]
     table, periods = _tables(variants, times)

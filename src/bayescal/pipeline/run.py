@@ -29,6 +29,7 @@ from typing import Any
 import numpy as np
 
 from bayescal.atomic import read_npz
+from bayescal.calibration.bounds import bound_warnings
 from bayescal.calibration.identifiability import moves_hint
 from bayescal.calibration.posterior import Posterior
 from bayescal.config import Study
@@ -52,6 +53,7 @@ from bayescal.pipeline.stages import (
     prepare,
     simulate,
 )
+from bayescal.report.trust import catalogue_verdicts, held_out_outputs
 from bayescal.runner import RunResults
 from bayescal.store import design as design_store
 from bayescal.store import discrepancy as discrepancy_store
@@ -341,6 +343,9 @@ def _calibration(r: _Runner, em: EmulatorResult) -> Posterior:
     for w in post.warnings:
         r.logger.warning("calibration: %s", w)
         r.say(f"warning: {w}")
+    for w in bound_warnings(post.unit_draws, post.priors):
+        r.logger.warning("calibration: %s", w)
+        r.say(f"WARNING: {w}")
     hint = moves_hint(post) if _gibbs_moves(r.ctx.study) else None
     if hint is not None:
         r.logger.warning("calibration: %s", hint)
@@ -429,6 +434,12 @@ def _predictions(
     start = time.perf_counter()
     pred = predict_stage(r.ctx, em, post, disc, nominal_run(r.ctx))
     files = predictions_store.save_predictions(r.out, pred.dataset, pred.metrics)
+    held = held_out_outputs(dict(pred.dataset.attrs))
+    for verdict in catalogue_verdicts(pred.metrics, held):
+        r.logger.info("predict: out of sample: %s", verdict.line())
+        if (text := verdict.warning()) is not None:
+            r.logger.warning("predict: %s", text)
+            r.say(f"WARNING: {text}")
     r.finish("predict", files, start)
     return pred
 

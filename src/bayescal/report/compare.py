@@ -21,6 +21,8 @@ __all__ = [
     "SMALL_DIFFERENCE",
     "TEST_WINDOW_TEXT",
     "comparison_markdown",
+    "diagnostics_mark",
+    "failed_diagnostics",
     "plot_comparison",
     "verdict",
 ]
@@ -34,6 +36,19 @@ TEST_WINDOW_TEXT = (
     "read by none of it; it is read only for the final metrics of the chosen variant "
     "(`bayescal run`, the report)."
 )
+
+
+def failed_diagnostics(row: pd.Series) -> bool:
+    """Whether a ranking row's calibration failed its MCMC diagnostics (the
+    ``diagnostics`` column; ``False`` for tables from before it)."""
+    return str(row.get("diagnostics", "passed")) == "failed"
+
+
+def diagnostics_mark(row: pd.Series) -> str:
+    """What follows a variant's verdict: ``""``, or that its calibration failed."""
+    if not failed_diagnostics(row):
+        return ""
+    return "; its calibration FAILED its MCMC diagnostics: the rank is not reliable (see the notes)"
 
 
 def verdict(diff: float, se_diff: float) -> str:
@@ -163,6 +178,7 @@ def comparison_markdown(
         "loo_band95": "left-out 95 % band",
         "loo_band50": "left-out 50 % band",
         "loo_band95_worst": "worst period, 95 % band",
+        "diagnostics": "MCMC diagnostics",
         "parameters": "parameters",
         "priors": "priors",
         "error_model": "error model",
@@ -181,14 +197,22 @@ def comparison_markdown(
         "|" + "|".join("---" for _ in shown) + "|",
     ]
     for _, row in table.iterrows():
-        lines.append("| " + " | ".join(_cell(row[c], c, row) for c in shown) + " |")
+        cells = {c: _cell(row[c], c, row) for c in shown}
+        if failed_diagnostics(row):
+            cells["variant"] = f"**{cells['variant']}** ⚠"
+            cells["diagnostics"] = "**FAILED**"
+        lines.append("| " + " | ".join(cells.values()) + " |")
     lines += ["", "## Reading it", ""]
     for _, row in table.iterrows():
-        lines.append(f"- **{row['variant']}**: {verdict(row['elpd_diff'], row['se_diff'])}")
+        said = verdict(row["elpd_diff"], row["se_diff"]) + diagnostics_mark(row)
+        lines.append(f"- **{row['variant']}**: {said}")
     lines += [
         "",
         f"A difference counts when it exceeds both {SMALL_DIFFERENCE:g} nats and twice its "
-        "SE; with few training periods the SE itself is rough.",
+        "SE; with few training periods the SE itself is rough. A variant marked ⚠ failed "
+        "the MCMC diagnostics of its calibration (R-hat above 1.01, bulk or tail ESS below "
+        "400, stuck chains, divergences): its scores rest on chains that have not "
+        "converged, so its rank is not reliable until longer chains pass.",
         "",
         "The left-out bands are the share of the training samples inside the central 95 % "
         "and 50 % band of their period's prediction by the calibration without that period "

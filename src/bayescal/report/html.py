@@ -66,6 +66,7 @@ th,td{border:1px solid #ccc;padding:.25em .6em;text-align:right}
 th{background:#f2f2f2}td:first-child,th:first-child{text-align:left}
 .warn{background:#fff3cd;border:2px solid #e0a800;padding:.6em 1em;border-radius:4px}
 .ok{background:#e8f5e9;border:1px solid #66bb6a;padding:.6em 1em;border-radius:4px}
+.catalogue{border:1px solid #bbb;padding:.6em 1em;border-radius:4px;margin-top:.6em}
 .desc{white-space:pre-wrap}.note{color:#555;font-size:.9em}
 figure{margin:1em 0}img{max-width:100%;border:1px solid #eee}
 figcaption{font-size:.9em;color:#444}code{background:#f6f6f6;padding:0 .2em}
@@ -108,6 +109,10 @@ class ReportInputs:
         Diagnostics and other warnings, shown at the top.
     settings
         Key settings shown in a table.
+    catalogue
+        One line per output: the calibrated prediction against the nominal
+        (catalogue) one out of sample (:mod:`bayescal.report.trust`), shown at
+        the top under the warnings.
     """
 
     study_name: str
@@ -125,6 +130,7 @@ class ReportInputs:
     delta_explained: dict[str, float] | None
     warnings: tuple[str, ...]
     settings: dict[str, object]
+    catalogue: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -431,7 +437,17 @@ def _summary(inputs: ReportInputs) -> str:
         items = "".join(f"<li>{_e(w)}</li>" for w in inputs.warnings)
         box = f'<div class="warn"><strong>Warnings</strong><ul>{items}</ul></div>'
     else:
-        box = '<div class="ok">No warnings: every diagnostic check passed.</div>'
+        box = (
+            '<div class="ok">No warnings: every diagnostic check passed, no parameter leans '
+            "on a bound of its prior, and no calibrated prediction is worse than the nominal "
+            "out of sample.</div>"
+        )
+    if inputs.catalogue:
+        items = "".join(f"<li>{_e(line)}</li>" for line in inputs.catalogue)
+        box += (
+            '<div class="catalogue"><strong>Out of sample, calibrated against nominal '
+            f"(catalogue) parameters</strong> (RMSE; within 5 %: no better)<ul>{items}</ul></div>"
+        )
     desc = f'<p class="desc">{_e(inputs.description)}</p>' if inputs.description else ""
     return desc + box + _table(["item", "value"], facts)
 

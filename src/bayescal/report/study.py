@@ -2,7 +2,9 @@
 
 :func:`write_study_report` takes a study's results as plain objects (no
 pipeline object: the pipeline calls it) and decides the report's content:
-the warnings at the top (failed diagnostics, failed simulator runs), the
+the warnings at the top (a parameter leaning on a prior bound, a calibrated
+prediction worse than the nominal out of sample, failed diagnostics, failed
+simulator runs) and the out-of-sample comparison with the nominal parameters, the
 settings table, and the correlation of the discrepancy with each boundary
 condition; :func:`bayescal.report.html.write_report` writes the page.
 """
@@ -23,6 +25,7 @@ from bayescal.discrepancy import Discrepancy
 from bayescal.emulator.gp import Emulator, LooResult
 from bayescal.periods import PeriodLayout
 from bayescal.report.html import ReportInputs, write_report
+from bayescal.report.trust import catalogue_verdicts, held_out_outputs, trust_warnings
 from bayescal.runner import RunFailure
 
 __all__ = ["delta_correlation", "report_settings", "write_study_report"]
@@ -155,7 +158,9 @@ def write_study_report(
     pathlib.Path
         ``folder / "report.html"``.
     """
-    warnings = list(posterior.warnings)
+    held = held_out_outputs(dict(predictions.attrs))
+    disc = None if discrepancy is None else discrepancy.posterior
+    warnings = [*trust_warnings(posterior, disc, metrics, held), *posterior.warnings]
     if failures:
         warnings.append(f"{len(failures)} simulator run(s) failed and were dropped")
     inputs = ReportInputs(
@@ -173,6 +178,7 @@ def write_study_report(
         delta_correlation=None if discrepancy is None else delta_correlation(predictions),
         delta_explained=None if discrepancy is None else dict(discrepancy.explained),
         warnings=tuple(warnings),
+        catalogue=tuple(v.line() for v in catalogue_verdicts(metrics, held)),
         settings=report_settings(study, layout, emulator),
     )
     return write_report(inputs, folder)

@@ -1,0 +1,187 @@
+"""Whether a calibration helped: the first screen of ``bayescal show`` and of the report.
+
+Two checks, each a pure function of results already computed:
+
+* :func:`catalogue_verdicts` -- does the calibrated prediction beat the nominal
+  (catalogue) one **out of sample**? For a calibrated output, on the test window;
+  for a held-out sensor (not read by the calibration), over its whole record
+  (training periods and test window pooled: every sample is out of sample for
+  it). The RMSEs of ``metrics.csv`` are compared: calibrated at most 95 % of
+  the nominal is *better*, more than 105 % is *worse*, in between *no better*
+  (:data:`NO_BETTER`). Worse is a warning: the parameters absorb model error.
+* :func:`bayescal.calibration.bounds.bound_leans` -- a parameter whose posterior
+  piles against a bound of its prior.
+
+:func:`trust_warnings` gathers both into the sentences shown before anything else.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Collection
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+import pandas as pd
+
+from bayescal.calibration.bounds import bound_warnings
+from bayescal.calibration.posterior import Posterior
+
+__all__ = [
+    "ABSORBS",
+    "NO_BETTER",
+    "CatalogueVerdict",
+    "catalogue_verdicts",
+    "held_out_outputs",
+    "trust_warnings",
+]
+
+#: Relative RMSE difference within which the calibrated prediction is "no better". [-]
+NO_BETTER = 0.05
+#: What a calibrated prediction worse than the catalogue's means.
+ABSORBS = "the parameters absorb model error; treat them as fitting constants, not properties"
+
+Verdict = Literal["better", "no better", "worse", "unknown"]
+
+
+@dataclass(frozen=True)
+class CatalogueVerdict:
+    """The calibrated prediction of one output against the nominal one, out of sample.
+
+    Attributes
+    ----------
+    output
+        The output (a measured column).
+    held_out
+        Whether the calibration did not read it (a held-out sensor).
+    nominal, calibrated
+        RMSE of the nominal and of the calibrated prediction on the samples
+        compared, in the output's unit (NaN where there are none).
+    """
+
+    output: str
+    held_out: bool
+    nominal: float
+    calibrated: float
+
+    @property
+    def where(self) -> str:
+        """``"test window"`` or ``"held-out sensor, whole record"``."""
+        return "held-out sensor, whole record" if self.held_out else "test window"
+
+    @property
+    def verdict(self) -> Verdict:
+        """``better`` (RMSE at most 95 % of the nominal), ``worse`` (above 105 %),
+        ``no better`` (in between), ``unknown`` (nothing to compare)."""
+        if not (np.isfinite(self.nominal) and np.isfinite(self.calibrated)) or self.nominal <= 0:
+            return "unknown"
+        ratio = self.calibrated / self.nominal
+        if ratio <= 1.0 - NO_BETTER:
+            return "better"
+        return "worse" if ratio > 1.0 + NO_BETTER else "no better"
+
+    def line(self) -> str:
+        """``heat_flux_in (test window): better: calibrated RMSE 1.2, nominal 2.3 (-48 %)``."""
+        if self.verdict == "unknown":
+            what = "no test window" if not self.held_out else "no samples"
+            return f"{self.output} ({self.where}): not known ({what} to compare on)"
+        change = 100.0 * (self.calibrated / self.nominal - 1.0)
+        return (
+            f"{self.output} ({self.where}): {self.verdict}: calibrated RMSE "
+            f"{self.calibrated:.4g}, nominal (catalogue) {self.nominal:.4g} ({change:+.0f} %)"
+        )
+
+    def warning(self) -> str | None:
+        """The loud sentence where the calibrated prediction is worse, else ``None``."""
+        if self.verdict != "worse":
+            return None
+        return (
+            f"{self.output}: the calibrated prediction is worse than the nominal (catalogue) "
+            f"one out of sample ({self.where}: RMSE {self.calibrated:.4g} against "
+            f"{self.nominal:.4g}): {ABSORBS}"
+        )
+
+
+def _rmse(rows: pd.DataFrame) -> float:
+    """RMSE over the rows' samples pooled (``sqrt(sum n mse / sum n)``)."""
+    if rows.empty:
+        return float("nan")
+    if len(rows) == 1:
+        return float(rows["rmse"].iloc[0])
+    n = rows["n"].to_numpy(dtype=float)
+    mse = rows["mse"].to_numpy(dtype=float)
+    return float(np.sqrt(np.sum(n * mse) / np.sum(n))) if np.sum(n) > 0 else float("nan")
+
+
+def catalogue_verdicts(
+    metrics: pd.DataFrame, held_out: Collection[str] = ()
+) -> tuple[CatalogueVerdict, ...]:
+    """Does the calibration beat the catalogue out of sample? One verdict per output.
+
+    Parameters
+    ----------
+    metrics
+        A ``metrics.csv`` table (columns ``output``, ``model``, ``window``,
+        ``n``, ``mse``, ``rmse``), from
+        :func:`bayescal.pipeline.predict.metrics_table`.
+    held_out
+        The outputs the calibration did not read: compared over every window
+        (pooled); the others on the test window only.
+
+    Returns
+    -------
+    tuple of CatalogueVerdict
+        In the table's order of outputs.
+    """
+    out = []
+    for output in dict.fromkeys(metrics["output"]):
+        rows = metrics[metrics["output"] == output]
+        is_held = output in held_out
+        if not is_held:
+            rows = rows[rows["window"] == "test"]
+        out.append(
+            CatalogueVerdict(
+                str(output),
+                is_held,
+                _rmse(rows[rows["model"] == "nominal"]),
+                _rmse(rows[rows["model"] == "calibrated"]),
+            )
+        )
+    return tuple(out)
+
+
+def held_out_outputs(attrs: dict[str, object]) -> tuple[str, ...]:
+    """The held-out outputs a predictions dataset's ``attrs`` name."""
+    return tuple(o for o in str(attrs.get("held_out", "")).split(",") if o)
+
+
+def trust_warnings(
+    posterior: Posterior | None,
+    discrepancy: Posterior | None = None,
+    metrics: pd.DataFrame | None = None,
+    held_out: Collection[str] = (),
+) -> tuple[str, ...]:
+    """The warnings that say the calibration did not help, for the first screen.
+
+    Parameters
+    ----------
+    posterior
+        The calibration's posterior: its parameters leaning on a prior bound
+        (:func:`bayescal.calibration.bounds.bound_warnings`).
+    discrepancy
+        The difference-process phase's theta* posterior, if estimated (the same).
+    metrics
+        The metrics table, if predicted: outputs whose calibrated prediction is
+        worse than the nominal out of sample (:func:`catalogue_verdicts`).
+    held_out
+        The held-out outputs of ``metrics``.
+    """
+    found: list[str] = []
+    for phase, post in (("calibration: ", posterior), ("difference process: ", discrepancy)):
+        if post is not None:
+            found += bound_warnings(post.unit_draws, post.priors, phase=phase)
+    if metrics is not None:
+        for verdict in catalogue_verdicts(metrics, held_out):
+            if (text := verdict.warning()) is not None:
+                found.append(text)
+    return tuple(found)
