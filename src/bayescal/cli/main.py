@@ -270,9 +270,19 @@ def run(
     "--data",
     "data",
     type=click.Path(path_type=Path),
-    required=True,
+    default=None,
     help="The new record: a data file in the study's format and column mapping (its "
-    "boundary conditions required, its measured outputs optional).",
+    "boundary conditions required, its measured outputs optional) [default with "
+    "--scenario: the study's own data file].",
+)
+@click.option(
+    "--scenario",
+    "scenario",
+    type=click.Path(path_type=Path),
+    default=None,
+    help="A scenario file ([baseline], [scenarios.NAME] with simulator = {...} keys and "
+    "set = {...} parameters): every scenario against the baseline at the same posterior "
+    "draws, with the paired interval of each change.",
 )
 @click.option(
     "--from",
@@ -315,7 +325,8 @@ def run(
 @user_errors
 def predict(
     study: Path,
-    data: Path,
+    data: Path | None,
+    scenario: Path | None,
     start: str | None,
     end: str | None,
     assignments: tuple[str, ...],
@@ -326,7 +337,7 @@ def predict(
     scheduler: str | None,
     quiet: bool,
 ) -> None:
-    """Predict a new record with a finished calibration, with its bands.
+    """Predict a new record, or compare scenarios, with a finished calibration.
 
     The calibrated model is run on the boundary conditions of another data
     file of the same construction (another season, another house, the rest of
@@ -338,6 +349,8 @@ def predict(
     Writes predictions.nc, predictions.csv (mean, 50 % and outer bands per
     output), metrics.csv, summary.md and a figure per output.
     """
+    import dataclasses
+
     import pandas as pd
 
     from bayescal.cli.progress import progress_options
@@ -357,12 +370,37 @@ def predict(
                 raise ConfigError(
                     f"{key} {text!r} is not a date and time", hint="e.g. 2013-09-20T00:00"
                 ) from None
-    if not data.is_file():
+    if data is None and scenario is None:
+        raise ConfigError("predict needs --data FILE or --scenario FILE", hint="see --help")
+    if data is not None and not data.is_file():
         raise ConfigError(f"{data}: no such data file", hint="give --data an existing file")
-    folder = out if out is not None else config.study.output_dir / f"predict-{data.stem}"
+    stem = scenario.stem if scenario is not None else data.stem if data is not None else ""
+    folder = out if out is not None else config.study.output_dir / f"predict-{stem}"
     if folder.exists() and not folder.is_dir():
         raise ConfigError(f"{folder} exists and is not a folder", hint="give --out a folder")
     options = Options(backend=backend, jobs=jobs, scheduler=scheduler, **progress_options(quiet))
+    if scenario is not None:
+        from bayescal.pipeline.scenario import run_scenarios, scenario_lines, write_scenarios
+
+        if assignments or method:
+            raise ConfigError("--set and --method do not apply to --scenario", hint="use set = {}")
+        results = load_results(config)
+        result = run_scenarios(
+            dataclasses.replace(
+                results, context=dataclasses.replace(results.context, options=options)
+            ),
+            scenario,
+            data=data,
+            start=window.get("--from"),
+            end=window.get("--to"),
+            say=(lambda _: None) if quiet else click.echo,
+        )
+        with writing(folder):
+            written = write_scenarios(result, folder)
+        click.echo("\n".join(scenario_lines(result)))
+        click.echo(f"wrote {folder} ({', '.join(p.name for p in written.values())})")
+        return
+    assert data is not None
     pred = predict_new(
         load_results(config),
         data,

@@ -81,7 +81,9 @@ __all__ = [
     "NewPrediction",
     "conditions_outside",
     "new_assembled",
+    "posterior_draws",
     "predict_new",
+    "runs_at",
 ]
 
 #: The window label of the new record's predicted samples.
@@ -165,7 +167,9 @@ def conditions_outside(assembled: Assembled, x_new: np.ndarray) -> tuple[str, ..
     return tuple(out)
 
 
-def _draws(posterior: Posterior, n: int, fixed: Mapping[str, float]) -> tuple[np.ndarray, ...]:
+def posterior_draws(
+    posterior: Posterior, n: int, fixed: Mapping[str, float]
+) -> tuple[np.ndarray, ...]:
     """``n`` draws thinned evenly: theta* ``(S, t)`` with ``fixed`` set, and their indices."""
     names = list(posterior.names)
     theta = posterior.draws.reshape(-1, len(names))
@@ -176,7 +180,7 @@ def _draws(posterior: Posterior, n: int, fixed: Mapping[str, float]) -> tuple[np
     return chosen, pick
 
 
-def _runs(ctx: Context, theta: np.ndarray) -> tuple[dict[str, np.ndarray], np.ndarray]:
+def runs_at(ctx: Context, theta: np.ndarray) -> tuple[dict[str, np.ndarray], np.ndarray]:
     """The simulator at ``theta`` on ``ctx``'s record: outputs of the runs that succeeded
     and their rows in ``theta``."""
     res = simulate(ctx, Design.from_values(ctx.priors, theta))
@@ -213,9 +217,9 @@ def _simulator_band(
     section = ctx.study.predict
     em = results.emulator
     assert em is not None  # checked by the caller
-    theta, pick = _draws(posterior, section.runs, fixed)
-    new_runs, ok_new = _runs(new_ctx, theta)
-    train_runs, ok_train = _runs(ctx, theta)
+    theta, pick = posterior_draws(posterior, section.runs, fixed)
+    new_runs, ok_new = runs_at(new_ctx, theta)
+    train_runs, ok_train = runs_at(ctx, theta)
     both = np.intersect1d(ok_new, ok_train)
     if both.size < 2:
         raise SimulatorError(
