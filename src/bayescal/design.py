@@ -35,8 +35,11 @@ from bayescal.errors import ConfigError
 __all__ = [
     "BetaPrior",
     "Design",
+    "LogitNormal",
+    "PosteriorPrior",
     "Prior",
     "UniformPrior",
+    "fit_logit_normal",
     "latin_hypercube",
     "log_gamma",
     "log_gamma_array",
@@ -250,6 +253,117 @@ class BetaPrior(Prior):
         return {**super().spec(), "a": self.a, "b": self.b}
 
 
+@dataclass(frozen=True)
+class LogitNormal:
+    """A joint density of several parameters on their normalised scales, from draws.
+
+    ``z = logit(u)`` is Gaussian with ``mean`` and ``cov``; the density of ``u``
+    on ``(0, 1)^m`` is that Gaussian's times the Jacobian ``prod 1 / (u (1 - u))``.
+    It is how another study's posterior becomes this one's prior
+    (:func:`fit_logit_normal`): correlations between the parameters are kept.
+
+    Parameters
+    ----------
+    names
+        The parameters, in the order of ``mean``.
+    mean
+        Mean of ``z``, ``(m,)``. [-]
+    cov
+        Covariance of ``z``, ``(m, m)``, positive definite. [-]
+    source
+        Where the draws came from (a study's output folder), for messages.
+    """
+
+    names: tuple[str, ...]
+    mean: tuple[float, ...]
+    cov: tuple[tuple[float, ...], ...]
+    source: str = ""
+
+    def logpdf_unit(self, u: Any) -> np.ndarray:
+        """Log density at the rows of ``u`` ``(B, m)``; ``-inf`` outside ``(0, 1)^m``."""
+        arr = np.atleast_2d(np.asarray(u, dtype=float))
+        inside = np.all((arr > 0.0) & (arr < 1.0), axis=1)
+        clipped = np.clip(arr, 1e-300, 1.0 - 1e-16)
+        z = special.logit(clipped) - np.asarray(self.mean)
+        cov = np.asarray(self.cov, dtype=float)
+        chol = np.linalg.cholesky(cov)
+        white = np.linalg.solve(chol, z.T)
+        m = len(self.names)
+        log_norm = -0.5 * m * math.log(2.0 * math.pi) - float(np.sum(np.log(np.diag(chol))))
+        jacobian = -np.sum(np.log(clipped) + np.log1p(-clipped), axis=1)
+        value = log_norm - 0.5 * np.sum(white * white, axis=0) + jacobian
+        return np.where(inside, value, -np.inf)
+
+
+def fit_logit_normal(names: tuple[str, ...], unit_draws: Any, source: str = "") -> LogitNormal:
+    """The :class:`LogitNormal` fitted (by moments of ``logit(u)``) to draws ``(S, m)``.
+
+    Draws on or outside the bounds are refused: the previous posterior must lie
+    inside this study's prior bounds.
+    """
+    arr = np.asarray(unit_draws, dtype=float)
+    if not np.all((arr > 0.0) & (arr < 1.0)):
+        raise ConfigError(
+            "the draws of the previous posterior reach or cross this study's prior bounds",
+            hint="widen the bounds of the shared parameters to hold the previous posterior",
+        )
+    z = special.logit(arr)
+    cov = np.atleast_2d(np.cov(z, rowvar=False))
+    return LogitNormal(
+        tuple(names),
+        tuple(float(v) for v in z.mean(axis=0)),
+        tuple(tuple(float(v) for v in row) for row in cov),
+        source,
+    )
+
+
+@dataclass(frozen=True)
+class PosteriorPrior(Prior):
+    """One parameter's share of a joint prior from a previous posterior (:class:`LogitNormal`).
+
+    Alone (plots, a report's prior curve, sampling starts) it is the joint's
+    marginal, a logit-normal on ``[lower, upper]``; the calibration's log prior
+    evaluates the joint once for all the parameters that share it
+    (:class:`bayescal.calibration.priors.ThetaPriors`), so their correlation is kept.
+    """
+
+    joint: LogitNormal = field(kw_only=True)
+    index: int = field(kw_only=True)
+    distribution: ClassVar[str] = "posterior"
+
+    def logpdf_unit(self, u: Any) -> np.ndarray:
+        """The marginal's log density on the normalised scale; ``-inf`` outside ``(0, 1)``."""
+        u = np.asarray(u, dtype=float)
+        inside = (u > 0.0) & (u < 1.0)
+        clipped = np.clip(u, 1e-300, 1.0 - 1e-16)
+        mu = self.joint.mean[self.index]
+        var = self.joint.cov[self.index][self.index]
+        z = special.logit(clipped)
+        value = (
+            -0.5 * math.log(2.0 * math.pi * var)
+            - 0.5 * (z - mu) ** 2 / var
+            - np.log(clipped)
+            - np.log1p(-clipped)
+        )
+        return np.where(inside, value, -np.inf)
+
+    def sample_unit(self, rng: np.random.Generator, size: int | tuple[int, ...]) -> np.ndarray:
+        """Draw from the marginal."""
+        mu = self.joint.mean[self.index]
+        sd = math.sqrt(self.joint.cov[self.index][self.index])
+        return np.asarray(special.expit(rng.normal(mu, sd, size)))
+
+    def spec(self) -> dict[str, Any]:
+        """The prior as a plain dictionary, with the whole joint density and its index."""
+        joint = {
+            "names": list(self.joint.names),
+            "mean": list(self.joint.mean),
+            "cov": [list(row) for row in self.joint.cov],
+            "source": self.joint.source,
+        }
+        return {**super().spec(), "index": self.index, "joint": joint}
+
+
 def prior_from_spec(
     distribution: str,
     lower: float,
@@ -259,6 +373,8 @@ def prior_from_spec(
     *,
     unit: str = "",
     description: str = "",
+    index: int | None = None,
+    joint: Mapping[str, Any] | None = None,
 ) -> Prior:
     """Build a prior from the study file's fields.
 
@@ -272,6 +388,9 @@ def prior_from_spec(
         Beta shape parameters (required for ``"beta"``, refused for ``"uniform"``). [-]
     unit, description
         The parameter's unit and description (see :class:`Prior`).
+    index, joint
+        ``"posterior"``: the parameter's place in the joint density and the
+        density itself (names, mean, cov, source; :class:`PosteriorPrior`).
 
     Returns
     -------
@@ -292,6 +411,16 @@ def prior_from_spec(
                 hint="set a and b (> 0); a = b = 1 is uniform",
             )
         return BetaPrior(lower, upper, a, b, unit=unit, description=description)
+    if distribution == "posterior" and joint is not None and index is not None:
+        density = LogitNormal(
+            tuple(joint["names"]),
+            tuple(float(v) for v in joint["mean"]),
+            tuple(tuple(float(v) for v in row) for row in joint["cov"]),
+            str(joint.get("source", "")),
+        )
+        return PosteriorPrior(
+            lower, upper, unit=unit, description=description, joint=density, index=int(index)
+        )
     raise ConfigError(f"unknown prior distribution {distribution!r}; expected 'uniform' or 'beta'")
 
 

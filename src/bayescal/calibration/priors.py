@@ -25,7 +25,15 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy import special
 
-from bayescal.design import BetaPrior, Prior, UniformPrior, log_gamma, log_gamma_array
+from bayescal.design import (
+    BetaPrior,
+    LogitNormal,
+    PosteriorPrior,
+    Prior,
+    UniformPrior,
+    log_gamma,
+    log_gamma_array,
+)
 from bayescal.emulator.noise import DELTA_RANGE, PHI_MAX
 from bayescal.errors import ConfigError
 
@@ -47,10 +55,40 @@ class ThetaPriors:
 
     priors: tuple[Prior, ...]
     is_uniform: tuple[bool, ...] = field(init=False, repr=False, compare=False)
+    joints: tuple[tuple[LogitNormal, tuple[int, ...]], ...] = field(
+        init=False, repr=False, compare=False
+    )
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "priors", tuple(self.priors))
-        object.__setattr__(self, "is_uniform", tuple(type(p) is UniformPrior for p in self.priors))
+        # a PosteriorPrior's coordinate is checked against its bounds here, and the
+        # joint density of its group is added once (joint_term)
+        object.__setattr__(
+            self,
+            "is_uniform",
+            tuple(type(p) in (UniformPrior, PosteriorPrior) for p in self.priors),
+        )
+        groups: dict[LogitNormal, dict[int, int]] = {}
+        for k, p in enumerate(self.priors):
+            if isinstance(p, PosteriorPrior):
+                groups.setdefault(p.joint, {})[p.index] = k
+        joints = []
+        for joint, places in groups.items():
+            if sorted(places) != list(range(len(joint.names))):
+                raise ConfigError(
+                    f"the prior from {joint.source or 'a previous posterior'} covers "
+                    f"{', '.join(joint.names)}: every one of them needs its share"
+                )
+            joints.append((joint, tuple(places[i] for i in range(len(joint.names)))))
+        object.__setattr__(self, "joints", tuple(joints))
+
+    def joint_term(self, u: ArrayLike) -> FloatArray:
+        """The joint densities of previous posteriors at the rows of ``u`` ``(B, >= t)``."""
+        arr = np.atleast_2d(np.asarray(u, dtype=float))
+        total = np.zeros(arr.shape[0])
+        for joint, columns in self.joints:
+            total += joint.logpdf_unit(arr[:, list(columns)])
+        return total
 
     def scalar(self, u: ArrayLike, start: float = 0.0) -> float:
         """``start + sum_k log p_k(u_k)`` at one point (``-inf`` outside the support)."""
@@ -63,6 +101,20 @@ class ThetaPriors:
                 total += 0.0 if 0.0 <= float(arr[k]) <= 1.0 else -_INF
             else:
                 total += float(prior.logpdf_unit(arr[k]))
+        if self.joints and total > -_INF:
+            total += float(self.joint_term(arr[None, : len(self.priors)])[0])
+        return total
+
+    def batch(self, u: FloatArray) -> FloatArray:
+        """``sum_k log p_k(u_k)`` per row of ``u`` ``(B, t)`` (``-inf`` outside the support)."""
+        total = np.zeros(u.shape[0])
+        for k, (prior, uniform) in enumerate(zip(self.priors, self.is_uniform, strict=True)):
+            if uniform:
+                total += np.where((u[:, k] >= 0.0) & (u[:, k] <= 1.0), 0.0, -_INF)
+            else:
+                total += np.asarray(prior.logpdf_unit(u[:, k]), dtype=float)
+        if self.joints:
+            total += self.joint_term(u)
         return total
 
 
@@ -160,7 +212,8 @@ class CalibrationPriors:
     # ------------------------------------------------------------ B points
 
     def term(self, column: FloatArray, k: int) -> FloatArray:
-        """Log prior of coordinate ``k`` at the values ``column`` ``(B,)``."""
+        """Log prior of coordinate ``k`` at the values ``column`` ``(B,)`` (a coordinate
+        of a previous posterior's joint density: its bounds; :meth:`joint_term` the rest)."""
         t = self.t
         if k >= t + 1 + self.n_outputs + self.n_phi:
             inside = (column >= DELTA_RANGE[0]) & (column <= DELTA_RANGE[1])
@@ -199,8 +252,17 @@ class CalibrationPriors:
         for k, prior in enumerate(self.theta):
             if not self.is_uniform[k]:
                 total += np.asarray(prior.logpdf_unit(points[:, k]), dtype=float)
+        if self.theta_priors.joints:
+            total = total + self.theta_priors.joint_term(points[:, : self.t])
         out: FloatArray = total
         return out
+
+    def joint_term(self, points: FloatArray) -> FloatArray:
+        """The part of the log prior that :meth:`term` leaves out: the joint densities
+        of previous posteriors (:class:`~bayescal.design.PosteriorPrior`), ``(B,)``."""
+        if not self.theta_priors.joints:
+            return np.zeros(points.shape[0])
+        return self.theta_priors.joint_term(points[:, : self.t])
 
     # ------------------------------------------------------------ JAX
 

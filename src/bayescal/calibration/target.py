@@ -310,7 +310,7 @@ class BatchedPosterior:
             return self(arr)
         self._prior_terms = np.column_stack([self.priors.term(arr[:, k], k) for k in range(t + 2)])
         out: FloatArray = prior + np.where(self._session.ok, self._session.values, -math.inf)
-        return out
+        return out  # prior: batch(), with the joint densities (propose adds them again)
 
     def propose(self, points: FloatArray, coordinate: int | tuple[int, ...]) -> FloatArray:
         """Log posterior with ``coordinate`` of the current points replaced (a tuple:
@@ -324,7 +324,7 @@ class BatchedPosterior:
         terms = self._prior_terms.copy()
         for k in moved:
             terms[:, k] = self.priors.term(points[:, k], k)
-        prior = terms.sum(axis=1)
+        prior = terms.sum(axis=1) + self.priors.joint_term(points)
         coordinate = moved[0]
         if coordinate < t:
             values, ok = session.propose_theta(points[:, :t])

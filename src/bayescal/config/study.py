@@ -99,11 +99,28 @@ class StudySection(Section):
         "Master seed; stages without their own seed derive theirs.", 0, default=0, ge=0
     )
     description: str = field_doc("Free text shown in the report.", "Paper wall, 2012", default="")
+    prior_from: Path | None = field_doc(
+        "Another calibrated study (its folder or study file, relative to this study's "
+        "folder): its posterior becomes the prior of the parameters the two share (a "
+        "logit-normal density fitted to its draws on this study's bounds, correlations "
+        "kept); the other parameters keep their own priors. The sequential calibration of "
+        "the paper's conclusion, and `bayescal update`.",
+        "../coheating",
+        default=None,
+    )
 
     @field_validator("output_dir")
     @classmethod
     def _inside(cls, value: Path, info: ValidationInfo) -> Path:
         return resolve_path(value, info, "a folder name")
+
+    @field_validator("prior_from")
+    @classmethod
+    def _other(cls, value: Path | None, info: ValidationInfo) -> Path | None:
+        if value is None or value.is_absolute():
+            return value
+        root = Path((info.context or {}).get("root", Path.cwd()))
+        return Path(os.path.normpath(root / value))  # another study: may lie beside this one
 
 
 def _length(value: object) -> object:

@@ -250,9 +250,7 @@ class SegmentTarget:
 
     def log_posterior(self, u: FloatArray) -> FloatArray:
         """Prior + eq. 19 + eq. 23 constant at ``u`` ``(B, t)``, one row per chain."""
-        prior = np.zeros(u.shape[0])
-        for k, p in enumerate(self.priors.priors):
-            prior += p.logpdf_unit(u[:, k])
+        prior = self.priors.batch(u)
         inside = np.isfinite(prior)
         lik = np.full(u.shape[0], -math.inf)
         if inside.all():

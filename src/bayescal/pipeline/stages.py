@@ -19,6 +19,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
+from functools import cached_property
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -118,10 +119,13 @@ class Context:
     out: Path
     options: Options
 
-    @property
+    @cached_property
     def priors(self) -> dict[str, Prior]:
-        """The study's priors, in parameter order."""
-        return self.study.priors()
+        """The study's priors, in parameter order (``[study] prior_from`` applied:
+        :mod:`bayescal.pipeline.sequential`)."""
+        from bayescal.pipeline.sequential import study_priors
+
+        return study_priors(self.study)
 
     @property
     def transforms(self) -> dict[str, LogLevel]:

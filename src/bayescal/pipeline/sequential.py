@@ -1,0 +1,147 @@
+"""A posterior as the next prior: ``[study] prior_from`` and ``bayescal update``.
+
+``[study] prior_from = "../other"`` reads the finished calibration of another
+study and makes its posterior the prior of the parameters the two studies
+share (same names): a :class:`~bayescal.design.LogitNormal` fitted to the
+draws on *this* study's bounds (``z = logit((x - lower) / (upper - lower))``
+Gaussian, mean and covariance of the draws' ``z``), so the correlation between
+the shared parameters is kept; each keeps this study's bounds, which must hold
+the previous posterior. The other parameters keep their own priors. How well
+the density fits the draws is measured and stated
+(:attr:`PriorFromDraws.fit`: the largest Kolmogorov-Smirnov distance between a
+marginal of the draws and the density's marginal; a value above
+:data:`FIT_WARN` is a warning: the posterior is skewed or multi-modal in a way
+one Gaussian in logit space does not follow).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from scipy import special, stats
+
+from bayescal.config import Study, load_study
+from bayescal.design import PosteriorPrior, Prior, fit_logit_normal
+from bayescal.errors import BayescalError, ConfigError
+from bayescal.store import posterior as posterior_store
+from bayescal.store.stages import StageLog
+
+__all__ = ["FIT_WARN", "PriorFromDraws", "prior_from_draws", "study_priors"]
+
+#: Largest Kolmogorov-Smirnov distance of a marginal above which the fit is a warning.
+FIT_WARN = 0.05
+
+
+@dataclass(frozen=True)
+class PriorFromDraws:
+    """The priors of a study with ``prior_from``, and how they were made.
+
+    Attributes
+    ----------
+    priors
+        Every calibrated parameter's prior, in study order.
+    shared
+        The parameters whose prior is the previous posterior.
+    source
+        The other study's output folder.
+    draws
+        Draws the density was fitted to.
+    fit
+        Parameter -> KS distance between its draws' and the density's marginal.
+    """
+
+    priors: dict[str, Prior]
+    shared: tuple[str, ...]
+    source: Path
+    draws: int
+    fit: dict[str, float]
+
+    def describe(self) -> str:
+        """One line: where the prior comes from and how well it fits."""
+        worst = max(self.fit, key=lambda n: self.fit[n])
+        line = (
+            f"prior of {', '.join(self.shared)} from the posterior of {self.source} "
+            f"(logit-normal fitted to {self.draws} draws; largest KS distance of a marginal "
+            f"{self.fit[worst]:.3f}, {worst})"
+        )
+        if self.fit[worst] > FIT_WARN:
+            line += (
+                f"; WARNING: above {FIT_WARN}: the previous posterior is not well described "
+                "by one Gaussian in logit space"
+            )
+        return line
+
+
+def prior_from_draws(study: Study) -> PriorFromDraws | None:
+    """The priors of ``study`` with its ``prior_from`` applied (``None`` without one).
+
+    Raises
+    ------
+    ConfigError
+        The other study cannot be read, has no finished calibration, shares no
+        parameter, or its posterior reaches this study's bounds.
+    """
+    other_path = study.study.prior_from
+    if other_path is None:
+        return None
+    try:
+        other = load_study(other_path)
+    except BayescalError as exc:
+        raise ConfigError(
+            f"study.prior_from: {exc.one_line()}", hint="give the folder of a calibrated study"
+        ) from None
+    out = other.root / other.study.output_dir
+    file = out / posterior_store.FILE
+    if not StageLog.open(out).finished("calibrate") or not file.is_file():
+        raise ConfigError(
+            f"study.prior_from: {out} holds no finished calibration",
+            hint=f"run `bayescal run {other.path}` first",
+        )
+    own = study.priors()
+    try:
+        previous = posterior_store.load_posterior(file)
+    except (BayescalError, OSError, ValueError, KeyError) as exc:
+        raise ConfigError(f"study.prior_from: cannot read {file} ({exc})") from None
+    shared = tuple(n for n in own if n in previous.names)
+    if not shared:
+        raise ConfigError(
+            f"study.prior_from: {other.path} calibrates {', '.join(previous.names)}, none of "
+            f"this study's {', '.join(own)}",
+            hint="a posterior carries over to parameters of the same name",
+        )
+    flat = previous.draws.reshape(-1, len(previous.names))
+    columns = [previous.names.index(n) for n in shared]
+    unit = np.column_stack(
+        [own[n].to_unit(flat[:, j]) for n, j in zip(shared, columns, strict=True)]
+    )
+    try:
+        joint = fit_logit_normal(shared, unit, str(out))
+    except ConfigError as exc:
+        raise ConfigError(f"study.prior_from: {exc.message}", hint=exc.hint) from None
+    priors: dict[str, Prior] = {}
+    for name, prior in own.items():
+        if name in shared:
+            priors[name] = PosteriorPrior(
+                prior.lower,
+                prior.upper,
+                unit=prior.unit,
+                description=prior.description,
+                joint=joint,
+                index=shared.index(name),
+            )
+        else:
+            priors[name] = prior
+    fit = {}
+    z = special.logit(unit)
+    for i, name in enumerate(shared):
+        sd = float(np.sqrt(joint.cov[i][i]))
+        fit[name] = float(stats.kstest(z[:, i], "norm", args=(joint.mean[i], sd)).statistic)
+    return PriorFromDraws(priors, shared, out, int(flat.shape[0]), fit)
+
+
+def study_priors(study: Study) -> dict[str, Prior]:
+    """The study's priors, with ``prior_from`` applied where it is set."""
+    made = prior_from_draws(study)
+    return study.priors() if made is None else made.priors
