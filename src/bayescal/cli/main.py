@@ -421,6 +421,74 @@ def predict(
 @main.command()
 @STUDY
 @click.option(
+    "--data",
+    type=click.Path(path_type=Path),
+    default=None,
+    help="The file holding the newly arrived data, in the study's format and mapping "
+    "[default: the study's own data file, read to its end].",
+)
+@click.option(
+    "--to",
+    "end",
+    default=None,
+    metavar="TIME",
+    help="Use the data up to this instant, exclusive (local time of the data) "
+    "[default: the file's end].",
+)
+@simulation_options
+@click.option("--quiet", "-q", is_flag=True, help="No progress bars or notes; errors only.")
+@user_errors
+def update(
+    study: Path,
+    data: Path | None,
+    end: str | None,
+    jobs: int | None,
+    backend: str | None,
+    scheduler: str | None,
+    quiet: bool,
+) -> None:
+    """Add newly arrived data to a finished calibration (a sequential calibration).
+
+    Writes update-00K.toml beside the study file: the study's settings on the
+    record from its test window (less one warm-up) to the end of the data,
+    with the previous posterior as the prior of its parameters ([study]
+    prior_from), and runs it into OUTPUT_DIR/update-00K. Each update starts from
+    the last finished one; a killed update resumes. Prints and writes
+    OUTPUT_DIR/update-history.csv: how the intervals narrowed, update by update.
+    """
+    import pandas as pd
+
+    from bayescal.cli.progress import progress_options
+    from bayescal.config import load_study
+    from bayescal.errors import ConfigError
+    from bayescal.pipeline import Options
+    from bayescal.pipeline.sequential import update as run_update
+
+    config = load_study(study)
+    stop = None
+    if end is not None:
+        try:
+            stop = pd.Timestamp(end)
+        except ValueError:
+            raise ConfigError(
+                f"--to {end!r} is not a date and time", hint="e.g. 2013-10-01"
+            ) from None
+    if data is not None and not data.is_file():
+        raise ConfigError(f"{data}: no such data file", hint="give --data an existing file")
+    options = Options(backend=backend, jobs=jobs, scheduler=scheduler, **progress_options(quiet))
+    result = run_update(
+        config, data=data, end=stop, options=options, say=(lambda _: None) if quiet else click.echo
+    )
+    columns = [c for c in result.history.columns if c.endswith(("_mean", "_lower", "_upper"))]
+    shown = result.history[["update", "last_training", "training_periods", *columns]]
+    click.echo("posterior, update by update (95 % intervals):")
+    click.echo(shown.to_string(index=False, float_format="{:.5g}".format))
+    click.echo(f"wrote {result.study.path} and {result.files['history']}")
+
+
+@main.command()
+@STUDY
+@click.option(
     "--apply",
     is_flag=True,
     help="Set screen = false on the proposed parameters and screen = true on the others in "

@@ -539,6 +539,12 @@ def run(
     ctx = prepare(study, options)
     needs = check_budget(study, ctx.measured, ctx.out)  # before any stage allocates
     tell = say or (lambda _: None)
+    if study.study.prior_from is not None:
+        from bayescal.pipeline.sequential import prior_from_draws
+
+        made = prior_from_draws(study)
+        if made is not None:
+            tell(made.describe())
     with writing(ctx.out, sum(need.disk for need in needs)):
         ctx.out.mkdir(parents=True, exist_ok=True)
         with OutputLock(ctx.out, command="run") as lock:

@@ -1,0 +1,149 @@
+"""A posterior as the next prior: ``[study] prior_from`` and ``bayescal update``.
+
+A virtual wall record of 14 days (the built-in wall at a known truth, white
+noise): the study is calibrated on its first eight days, then ``update`` adds
+the rest with the first posterior as prior.
+"""
+
+from __future__ import annotations
+
+import shutil
+import tomllib
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+import pytest
+import tomli_w
+from click.testing import CliRunner
+
+from bayescal.cli import main
+from bayescal.config import load_study
+from bayescal.design import PosteriorPrior
+from bayescal.errors import BayescalError, ConfigError
+from bayescal.pipeline import Options, load_results, run
+from bayescal.pipeline.sequential import HISTORY_FILE, prior_from_draws, update, update_files
+from compare_study import STUDY
+from virtual_wall import virtual_experiment
+
+TRUTH = {"k_cb": 0.124, "cp_cb": 845.41, "cp_fb": 840.0}
+
+
+def _record() -> pd.DataFrame:
+    ve = virtual_experiment(seed=5, truth=TRUTH, runs=5, periods=13, warmup_days=1, test_days=0)
+    times = pd.date_range("2012-02-01", periods=ve.layout.n_total, freq="30min")
+    return pd.DataFrame(
+        {
+            "time": times.strftime("%Y-%m-%dT%H:%M:%S"),
+            "T_se": np.round(ve.boundary["temp_surf_out"], 6),
+            "T_si": np.round(ve.boundary["temp_surf_in"], 6),
+            "q_si": np.round(ve.measured["heat_flux_in"], 6),
+        }
+    )
+
+
+def _moments(posterior: Any, k: int) -> tuple[float, float]:
+    draws = posterior.draws.reshape(-1, len(posterior.names))[:, k]
+    return float(draws.mean()), float(draws.std())
+
+
+def _study(folder: Path, end: str | None = "2012-02-09T00:00", extra: str = "") -> Path:
+    folder.mkdir(parents=True, exist_ok=True)
+    _record().to_csv(folder / "wall.csv", index=False)
+    text = STUDY.format(name=folder.name, model="white")
+    if end is not None:
+        text = text.replace('time_zone = "UTC"\n', f'time_zone = "UTC"\nend = "{end}"\n')
+    text = text.replace("seed = 11\n", "seed = 11\n" + extra)
+    (folder / "study.toml").write_text(text, encoding="utf-8")
+    return folder
+
+
+@pytest.fixture(scope="module")
+def first(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    folder = _study(tmp_path_factory.mktemp("sequential") / "wall")
+    run(load_study(folder), until="calibrate", options=Options(backend="serial"))
+    return folder
+
+
+def test_update_adds_the_new_days_with_the_posterior_as_prior(first: Path, tmp_path: Path) -> None:
+    folder = tmp_path / "wall"
+    shutil.copytree(first, folder)
+    study = load_study(folder)
+    said: list[str] = []
+    done = update(study, options=Options(backend="serial"), say=said.append)
+    assert [p.name for p in update_files(study)] == ["update-001.toml"]
+    assert any("prior of k_cb, cp_cb from the posterior" in line for line in said)
+    new = load_results(done.study)
+    assert new.posterior is not None
+    assert all(isinstance(p, PosteriorPrior) for p in new.posterior.priors.values())
+    history = pd.read_csv(folder / "out" / HISTORY_FILE)
+    assert list(history["update"]) == [0, 1]
+    assert pd.Timestamp(history["last_training"][1]) > pd.Timestamp(history["last_training"][0])
+    width = history["k_cb_upper"] - history["k_cb_lower"]
+    assert width[1] < width[0]  # more days and the previous posterior: narrower
+    # Bayes' rule: the update is the first posterior times the new days' likelihood,
+    # which the same study without prior_from (uniform priors) shows alone. For these
+    # near-Gaussian posteriors the product's mean and SD are the precision-weighted
+    # ones; the tolerance is a few Monte Carlo standard errors (ESS ~ 200 a chain set).
+    raw = tomllib.loads((folder / "update-001.toml").read_text(encoding="utf-8"))
+    del raw["study"]["prior_from"]
+    raw["study"]["output_dir"] = "out/plain"
+    (folder / "plain.toml").write_text(tomli_w.dumps(raw), encoding="utf-8")
+    plain = load_study(folder / "plain.toml")
+    run(plain, until="calibrate", options=Options(backend="serial"))
+    before = load_results(study).posterior
+    alone = load_results(plain).posterior
+    after = new.posterior
+    assert before is not None
+    assert alone is not None
+    for k, name in enumerate(after.names):
+        m1, s1 = _moments(before, k)
+        m2, s2 = _moments(alone, k)
+        m, s = _moments(after, k)
+        weight1, weight2 = s1**-2, s2**-2
+        product_mean = (weight1 * m1 + weight2 * m2) / (weight1 + weight2)
+        product_sd = (weight1 + weight2) ** -0.5
+        assert abs(m - product_mean) < 0.35 * product_sd, (name, m, product_mean, product_sd)
+        assert s == pytest.approx(product_sd, rel=0.2), name
+    # the update's record starts one warm-up before the first study's test window
+    assert load_study(folder / "update-001.toml").data.start == pd.Timestamp("2012-02-07")
+    # nothing newer: the record after the last test window is too short for a period
+    with pytest.raises(BayescalError):
+        update(load_study(folder), options=Options(backend="serial"))
+
+
+def test_prior_from_refuses_an_unfinished_or_unrelated_study(first: Path, tmp_path: Path) -> None:
+    empty = _study(tmp_path / "empty")
+    other = _study(tmp_path / "other", extra=f'prior_from = "{empty}"\n')
+    with pytest.raises(ConfigError, match="holds no finished calibration"):
+        prior_from_draws(load_study(other))
+    text = (first / "study.toml").read_text(encoding="utf-8")
+    unrelated = tmp_path / "unrelated"
+    shutil.copytree(first, unrelated)
+    renamed = text.replace("parameters.k_cb", "parameters.k_xx").replace(
+        "parameters.cp_cb", "parameters.cp_xx"
+    )
+    (unrelated / "study.toml").write_text(renamed, encoding="utf-8")
+    third = _study(tmp_path / "third", extra=f'prior_from = "{first}"\n')
+    made = prior_from_draws(load_study(third))
+    assert made is not None
+    assert made.shared == ("k_cb", "cp_cb")
+    assert "logit-normal fitted to" in made.describe()
+    renamed_study = tmp_path / "fourth"
+    _study(renamed_study, extra=f'prior_from = "{first}"\n')
+    (renamed_study / "study.toml").write_text(
+        (renamed_study / "study.toml").read_text(encoding="utf-8").replace("k_cb", "k_xx"),
+        encoding="utf-8",
+    )
+    shared = prior_from_draws(load_study(renamed_study))
+    assert shared is not None
+    assert shared.shared == ("cp_cb",)
+
+
+def test_cli_update_on_an_uncalibrated_study_is_one_line(tmp_path: Path) -> None:
+    folder = _study(tmp_path / "raw")
+    res = CliRunner().invoke(main, ["update", str(folder)])
+    assert res.exit_code == 2
+    assert res.output.count("\n") == 1
+    assert "no finished calibration to update" in res.output
