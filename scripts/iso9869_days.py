@@ -31,9 +31,21 @@ campaign starts with a wall in whatever state it is.
 The Twin House sets read ``../shared/data`` beside the repository root and are
 skipped with a message where it is absent.
 
-Run (seconds)::
+``--bayes D [D ...]`` adds the Bayesian side: the ``wall`` example (its own data,
+EnergyPlus at the stated truth) and the ``twinhouse`` example are calibrated with
+bayescal on a record cut to ``[data] end`` = the first local midnight + warm-up + D
+training days + a one-day test window (``[periods] test_samples = 1 day``), with
+reduced chains (``BAYES_SIZES``: 4 x (500 + 500) sweeps, no extension), up to the calibration.
+Printed per D: the posterior mean and 95 % interval of the derived U-value, whether
+it holds the truth (the wall) or the catalogue U (the Twin House, which is no
+truth), and the ISO 9869 U of the same record (warm-up + training days, from the
+first local midnight). Study folders go to ``--out`` (default ``out/iso9869``).
+
+Run (seconds; with ``--bayes`` about a minute per calibration)::
 
     OPENBLAS_NUM_THREADS=1 PYTHONPATH=src python scripts/iso9869_days.py --truths 10
+    OPENBLAS_NUM_THREADS=1 PYTHONPATH=src python scripts/iso9869_days.py --set twinhouse \
+        --bayes 3 7 14 28
 """
 
 from __future__ import annotations
@@ -44,6 +56,9 @@ for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")
 
 import argparse  # noqa: E402
+import datetime as dt  # noqa: E402
+import re  # noqa: E402
+import time  # noqa: E402
 import tomllib  # noqa: E402
 from dataclasses import dataclass  # noqa: E402
 from pathlib import Path  # noqa: E402
@@ -62,7 +77,9 @@ from bayescal.config import (  # noqa: E402
 )
 from bayescal.config.study import study_from_dict  # noqa: E402
 from bayescal.data.measured import MeasuredData, load_measured  # noqa: E402
+from bayescal.examples import copy_example  # noqa: E402
 from bayescal.iso9869 import AverageMethod, average_method  # noqa: E402
+from bayescal.pipeline import Options, run  # noqa: E402
 from bayescal.simulators.base import Derivable  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
@@ -72,6 +89,16 @@ TWINHOUSE_FILE = (
 SEED = 9869
 REPORT_DAYS = (3, 5, 7, 10, 14, 21, 28)
 BAND = 0.10
+#: The wall example's truth (its data/README.md: EnergyPlus at these values).
+WALL_TRUTH = {"k_cb": 0.124, "cp_cb": 845.0, "cp_fb": 800.0}
+#: Reduced sizes of the repeated calibrations (the examples' own design and error models).
+BAYES_SIZES = """
+[calibration]
+chains = 4
+burn = 500
+samples = 500
+max_samples = 500
+"""
 
 
 @dataclass(frozen=True)
@@ -209,6 +236,80 @@ def curve(wall: Wall) -> str:
     return markdown(rows)
 
 
+def _local_midnight(data: MeasuredData) -> dt.datetime:
+    start = _midnight(data)
+    utc = pd.Timestamp(data.times[start]).tz_localize("UTC")
+    return utc.tz_convert(data.zone).to_pydatetime().replace(tzinfo=None)
+
+
+def _cut_study(example: str, folder: Path, end: dt.datetime, per_day: int) -> Path:
+    """The example in ``folder``, its record ending at ``end`` (local), one test day."""
+    copy_example(example, folder, force=True)
+    path = folder / "study.toml"
+    text = path.read_text(encoding="utf-8")
+    if example == "twinhouse":
+        line = 'file = "data/validationdataN2Exp1.txt"'
+        text = text.replace(line, f"file = {TWINHOUSE_FILE.as_posix()!r}")
+    text = text.replace("[data]\n", f'[data]\nend = "{end.isoformat()}"\n', 1)
+    text, found = re.subn(r"(?m)^test_(samples|fraction) = .*$", f"test_samples = {per_day}", text)
+    if found != 1:
+        raise SystemExit(f"the {example} example changed: no single test window line")
+    cut = text.index("[calibration]")
+    rest = text[cut + len("[calibration]") :]
+    following = re.search(r"(?m)^\[", rest)
+    text = text[:cut] + (rest[following.start() :] if following else "") + BAYES_SIZES
+    path.write_text(text, encoding="utf-8")
+    return folder
+
+
+def bayes_rows(example: str, days: list[int], out: Path) -> list[dict[str, object]]:
+    """The derived U's 95 % interval after ``days`` training days, with the ISO U."""
+    study = wall_study() if example == "wall" else twinhouse_study()
+    if study is None:
+        return []
+    data = load_measured(study)
+    simulator = build_simulator(study)
+    nominal = nominal_parameters(study)
+    reference = _u(simulator, {**nominal, **WALL_TRUTH} if example == "wall" else nominal)
+    am = _analyse(data, data.outputs["heat_flux_in"])
+    per_day = round(86400.0 / data.step)
+    warmup = round(study.periods.warmup.total_seconds() / 86400.0)
+    midnight = _local_midnight(data)
+    rows: list[dict[str, object]] = []
+    for d in days:
+        end = midnight + dt.timedelta(days=warmup + d + 1)
+        folder = _cut_study(example, out / f"{example}-{d}d", end, per_day)
+        t0 = time.perf_counter()
+        res = run(load_study(folder), until="calibrate", options=Options())
+        seconds = time.perf_counter() - t0
+        assert res.posterior is not None
+        u = res.posterior.summary().loc["U_value"]
+        mean, lower, upper = float(u["mean"]), float(u["lower"]), float(u["upper"])
+        record = warmup + d  # whole days from the first local midnight to the test day
+        iso = float(am.u[record - 1]) if record <= am.days[-1] else float("nan")
+        rows.append(
+            {
+                "wall": example,
+                "train_days": res.context.measured.layout.m_star,
+                "record_days": record,
+                "U_ref": round(reference, 4),
+                "U_mean": round(mean, 4),
+                "U_95": f"[{lower:.4f}, {upper:.4f}]",
+                "holds_ref": bool(lower <= reference <= upper),
+                "width_%": round(100 * (upper - lower) / reference, 1),
+                "U_iso": round(iso, 4),
+                "iso_err_%": round(100 * (iso / reference - 1.0), 1),
+                "iso_conv": bool(am.converged[record - 1]) if record <= am.days[-1] else "-",
+                "U_rhat": round(float(u["r_hat"]), 3),
+                "U_ess": round(float(u["ess_bulk"])),
+                "warnings": len(res.posterior.warnings),
+                "seconds": round(seconds),
+            }
+        )
+        print(markdown(rows[-1:]), flush=True)
+    return rows
+
+
 def _parse(argv: list[str] | None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--truths", type=int, default=10, help="virtual walls per set")
@@ -219,6 +320,10 @@ def _parse(argv: list[str] | None) -> argparse.Namespace:
         help="which walls (default: all three sets)",
     )
     parser.add_argument("--curve", action="store_true", help="print the measured wall's days")
+    parser.add_argument(
+        "--bayes", type=int, nargs="+", metavar="D", help="calibrate on D training days"
+    )
+    parser.add_argument("--out", type=Path, default=REPO / "out" / "iso9869")
     return parser.parse_args(argv)
 
 
@@ -238,6 +343,13 @@ def main(argv: list[str] | None = None) -> int:
     if measured is not None and args.curve:
         print()
         print(curve(measured))
+    if args.bayes:
+        bayes: list[dict[str, object]] = []
+        for example in ("wall", "twinhouse"):
+            if example in sets:
+                bayes += bayes_rows(example, sorted(args.bayes), args.out)
+        print()
+        print(markdown(bayes))
     return 0
 
 
