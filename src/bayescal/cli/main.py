@@ -313,11 +313,15 @@ def screen(
 @user_errors
 def show(study: Path) -> None:
     """Summarise a calibration: posterior, diagnostics, metrics (what has run so far)."""
+    from bayescal.cli.insitu import iso9869_line
     from bayescal.cli.progress import describe
     from bayescal.config import load_study
     from bayescal.pipeline import load_results
 
-    click.echo(describe(load_results(load_study(study))))
+    res = load_results(load_study(study))
+    click.echo(describe(res))
+    if (line := iso9869_line(res.context.study, res.context.measured)) is not None:
+        click.echo(line)
 
 
 @main.command()
