@@ -80,7 +80,7 @@ from bayescal.data.measured import MeasuredData, load_measured  # noqa: E402
 from bayescal.examples import copy_example  # noqa: E402
 from bayescal.iso9869 import AverageMethod, average_method  # noqa: E402
 from bayescal.pipeline import Options, run  # noqa: E402
-from bayescal.simulators.base import Derivable  # noqa: E402
+from bayescal.simulators.base import Derivable, Forcing  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
 TWINHOUSE_FILE = (
@@ -89,6 +89,8 @@ TWINHOUSE_FILE = (
 SEED = 9869
 REPORT_DAYS = (3, 5, 7, 10, 14, 21, 28)
 BAND = 0.10
+#: Truths drawn for the virtual Twin House walls of ``--bayes-virtual`` (their first ones).
+VIRTUAL_TRUTHS = 10
 #: The wall example's truth (its data/README.md: EnergyPlus at these values).
 WALL_TRUTH = {"k_cb": 0.124, "cp_cb": 845.0, "cp_fb": 800.0}
 #: Reduced sizes of the repeated calibrations (the examples' own design and error models).
@@ -114,13 +116,14 @@ def wall_study() -> Study:
     return load_study(examples.path("wall"))
 
 
-def twinhouse_study() -> Study | None:
+def twinhouse_study(file: Path = TWINHOUSE_FILE) -> Study | None:
+    """The twinhouse example reading ``file`` (the measurements, or a virtual copy)."""
     if not TWINHOUSE_FILE.is_file():
         print(f"skipped: the Twin House measurements are not at {TWINHOUSE_FILE}")
         return None
     folder = examples.path("twinhouse")
     raw = tomllib.loads((folder / "study.toml").read_text(encoding="utf-8"))
-    raw["data"]["file"] = TWINHOUSE_FILE.as_posix()
+    raw["data"]["file"] = file.as_posix()
     return study_from_dict(raw, root=folder, source=str(folder / "study.toml"))
 
 
@@ -242,14 +245,38 @@ def _local_midnight(data: MeasuredData) -> dt.datetime:
     return utc.tz_convert(data.zone).to_pydatetime().replace(tzinfo=None)
 
 
-def _cut_study(example: str, folder: Path, end: dt.datetime, per_day: int) -> Path:
+def virtual_twinhouse_file(study: Study, truth: dict[str, float], seed: int, path: Path) -> Path:
+    """The Twin House file with the built-in wall's flux at ``truth`` in place of the measured.
+
+    The wall runs on the file's 10-minute clock under the measured surface
+    temperatures; column 15 (inside flux) becomes its flux plus white noise of SD
+    0.2 W/m², column 16 (the held-out temperature inside the wall) its temperature.
+    """
+    lines = TWINHOUSE_FILE.read_text(encoding="utf-8").splitlines()
+    table = np.loadtxt(lines[2:])
+    simulator = build_simulator(study)
+    step = float(table[1, 0] - table[0, 0])
+    forcing = Forcing(step, {"temp_surf_out": table[:, 18], "temp_surf_in": table[:, 14]})
+    out = simulator.simulate({**nominal_parameters(study), **truth}, forcing)
+    rng = np.random.default_rng(seed)
+    table[:, 15] = out["heat_flux_in"] + rng.normal(0.0, 0.2, table.shape[0])
+    table[:, 16] = out["temp_interface_2"]
+    path.parent.mkdir(parents=True, exist_ok=True)
+    body = "\n".join(" ".join(f"{v:.9g}" for v in row) for row in table)
+    path.write_text("\n".join(lines[:2]) + "\n" + body + "\n", encoding="utf-8")
+    return path
+
+
+def _cut_study(
+    example: str, folder: Path, end: dt.datetime, per_day: int, file: Path | None
+) -> Path:
     """The example in ``folder``, its record ending at ``end`` (local), one test day."""
     copy_example(example, folder, force=True)
     path = folder / "study.toml"
     text = path.read_text(encoding="utf-8")
-    if example == "twinhouse":
+    if file is not None:
         line = 'file = "data/validationdataN2Exp1.txt"'
-        text = text.replace(line, f"file = {TWINHOUSE_FILE.as_posix()!r}")
+        text = text.replace(line, f"file = {file.as_posix()!r}")
     text = text.replace("[data]\n", f'[data]\nend = "{end.isoformat()}"\n', 1)
     text, found = re.subn(r"(?m)^test_(samples|fraction) = .*$", f"test_samples = {per_day}", text)
     if found != 1:
@@ -262,15 +289,33 @@ def _cut_study(example: str, folder: Path, end: dt.datetime, per_day: int) -> Pa
     return folder
 
 
-def bayes_rows(example: str, days: list[int], out: Path) -> list[dict[str, object]]:
-    """The derived U's 95 % interval after ``days`` training days, with the ISO U."""
+def bayes_rows(
+    example: str, days: list[int], out: Path, virtual: int | None = None
+) -> list[dict[str, object]]:
+    """The derived U's 95 % interval after ``days`` training days, with the ISO U.
+
+    ``virtual = i``: the twinhouse example on the virtual Twin House wall ``i``
+    (1-based, the truths of the ``twinhouse-virtual`` set at ``--truths 10``).
+    """
     study = wall_study() if example == "wall" else twinhouse_study()
     if study is None:
         return []
-    data = load_measured(study)
     simulator = build_simulator(study)
     nominal = nominal_parameters(study)
-    reference = _u(simulator, {**nominal, **WALL_TRUTH} if example == "wall" else nominal)
+    file, label = (None, example) if example == "wall" else (TWINHOUSE_FILE, example)
+    if example == "wall":
+        reference = _u(simulator, {**nominal, **WALL_TRUTH})
+    elif virtual is None:
+        reference = _u(simulator, nominal)  # the catalogue U: no truth
+    else:
+        physical = ["k_brick", "c_brick", "k_eps", "c_plaster_in"]
+        truth = truths(study, VIRTUAL_TRUTHS, physical)[virtual - 1]
+        label = f"twinhouse virtual {virtual}"
+        file = virtual_twinhouse_file(study, truth, SEED + virtual, out / f"virtual-{virtual}.txt")
+        study = twinhouse_study(file)
+        assert study is not None
+        reference = _u(simulator, {**nominal, **truth})
+    data = load_measured(study)
     am = _analyse(data, data.outputs["heat_flux_in"])
     per_day = round(86400.0 / data.step)
     warmup = round(study.periods.warmup.total_seconds() / 86400.0)
@@ -278,7 +323,7 @@ def bayes_rows(example: str, days: list[int], out: Path) -> list[dict[str, objec
     rows: list[dict[str, object]] = []
     for d in days:
         end = midnight + dt.timedelta(days=warmup + d + 1)
-        folder = _cut_study(example, out / f"{example}-{d}d", end, per_day)
+        folder = _cut_study(example, out / f"{label.replace(' ', '-')}-{d}d", end, per_day, file)
         t0 = time.perf_counter()
         res = run(load_study(folder), until="calibrate", options=Options())
         seconds = time.perf_counter() - t0
@@ -289,7 +334,7 @@ def bayes_rows(example: str, days: list[int], out: Path) -> list[dict[str, objec
         iso = float(am.u[record - 1]) if record <= am.days[-1] else float("nan")
         rows.append(
             {
-                "wall": example,
+                "wall": label,
                 "train_days": res.context.measured.layout.m_star,
                 "record_days": record,
                 "U_ref": round(reference, 4),
@@ -323,6 +368,14 @@ def _parse(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument(
         "--bayes", type=int, nargs="+", metavar="D", help="calibrate on D training days"
     )
+    parser.add_argument(
+        "--bayes-virtual",
+        type=int,
+        nargs="+",
+        default=[],
+        metavar="I",
+        help="with --bayes: also the virtual Twin House walls I (1-based)",
+    )
     parser.add_argument("--out", type=Path, default=REPO / "out" / "iso9869")
     return parser.parse_args(argv)
 
@@ -348,6 +401,8 @@ def main(argv: list[str] | None = None) -> int:
         for example in ("wall", "twinhouse"):
             if example in sets:
                 bayes += bayes_rows(example, sorted(args.bayes), args.out)
+        for i in args.bayes_virtual:
+            bayes += bayes_rows("twinhouse", sorted(args.bayes), args.out, virtual=i)
         print()
         print(markdown(bayes))
     return 0
