@@ -239,7 +239,7 @@ def curve(wall: Wall) -> str:
     return markdown(rows)
 
 
-def _local_midnight(data: MeasuredData) -> dt.datetime:
+def local_midnight(data: MeasuredData) -> dt.datetime:
     start = _midnight(data)
     utc = pd.Timestamp(data.times[start]).tz_localize("UTC")
     return utc.tz_convert(data.zone).to_pydatetime().replace(tzinfo=None)
@@ -267,7 +267,7 @@ def virtual_twinhouse_file(study: Study, truth: dict[str, float], seed: int, pat
     return path
 
 
-def _cut_study(
+def cut_study(
     example: str, folder: Path, end: dt.datetime, per_day: int, file: Path | None
 ) -> Path:
     """The example in ``folder``, its record ending at ``end`` (local), one test day."""
@@ -319,11 +319,11 @@ def bayes_rows(
     am = _analyse(data, data.outputs["heat_flux_in"])
     per_day = round(86400.0 / data.step)
     warmup = round(study.periods.warmup.total_seconds() / 86400.0)
-    midnight = _local_midnight(data)
+    midnight = local_midnight(data)
     rows: list[dict[str, object]] = []
     for d in days:
         end = midnight + dt.timedelta(days=warmup + d + 1)
-        folder = _cut_study(example, out / f"{label.replace(' ', '-')}-{d}d", end, per_day, file)
+        folder = cut_study(example, out / f"{label.replace(' ', '-')}-{d}d", end, per_day, file)
         t0 = time.perf_counter()
         res = run(load_study(folder), until="calibrate", options=Options())
         seconds = time.perf_counter() - t0

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import datetime as dt
 import sys
 from pathlib import Path
 
@@ -14,6 +15,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "scripts"))
 
 import iso9869_days as script
 
+from bayescal.config import load_study
+from bayescal.data.measured import load_measured
 from bayescal.iso9869 import average_method
 
 
@@ -60,3 +63,16 @@ def test_the_twinhouse_catalogue_u_is_the_layers_of_the_shared_readme() -> None:
     r = 0.010 / 0.8 + 0.080 / 0.04 + 0.030 / 1.0 + 0.300 / 0.22 + 0.010 / 1.0
     assert wall.truth_u == pytest.approx(1.0 / (0.13 + r + 0.04))
     assert wall.am.days[-1] == 40  # 22 Aug 00:00 to 1 Oct 00:00 local time
+
+
+def test_a_cut_study_has_the_training_days_asked_for(tmp_path: Path) -> None:
+    study = script.wall_study()
+    data = load_measured(study)
+    end = script.local_midnight(data) + dt.timedelta(days=3 + 5 + 1)  # warm-up, 5, test
+    folder = script.cut_study("wall", tmp_path / "cut", end, 48, None)
+    cut = load_study(folder)
+    layout = load_measured(cut).layout
+    assert (layout.m_star, layout.test) == (5, 48)
+    text = (folder / "study.toml").read_text(encoding="utf-8")
+    assert "chains = 4\nburn = 500\nsamples = 500\nmax_samples = 500" in text
+    assert text.count("[calibration]") == 1
