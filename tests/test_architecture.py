@@ -42,6 +42,7 @@ FLOORS: dict[str, int] = {
     "mcmc": 3,
     "simulators": 3,
     "screening": 3,
+    "iso9869": 3,
     "emulator": 4,
     "calibration": 5,
     "discrepancy": 6,

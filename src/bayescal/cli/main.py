@@ -534,12 +534,20 @@ def screen(
 @STUDY
 @user_errors
 def show(study: Path) -> None:
-    """Summarise a calibration: posterior, diagnostics, metrics (what has run so far)."""
+    """Summarise a calibration: posterior, diagnostics, metrics (what has run so far).
+
+    For a built-in wall with surface boundaries and daily periods, also the in-situ U
+    of the ISO 9869-1 average method on the training days.
+    """
+    from bayescal.cli.insitu import iso9869_line
     from bayescal.cli.progress import describe
     from bayescal.config import load_study
     from bayescal.pipeline import load_results
 
-    click.echo(describe(load_results(load_study(study))))
+    res = load_results(load_study(study))
+    click.echo(describe(res))
+    if (line := iso9869_line(res.context.study, res.context.measured)) is not None:
+        click.echo(line)
 
 
 @main.command()
