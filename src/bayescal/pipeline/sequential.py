@@ -16,6 +16,7 @@ one Gaussian in logit space does not follow).
 
 from __future__ import annotations
 
+import functools
 import tomllib
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -115,7 +116,7 @@ def prior_from_draws(study: Study) -> PriorFromDraws | None:
         )
     own = study.priors()
     try:
-        previous = posterior_store.load_posterior(file)
+        previous = _posterior(str(file), file.stat().st_mtime_ns)
     except (BayescalError, OSError, ValueError, KeyError) as exc:
         raise ConfigError(f"study.prior_from: cannot read {file} ({exc})") from None
     shared = tuple(n for n in own if n in previous.names)
@@ -153,6 +154,13 @@ def prior_from_draws(study: Study) -> PriorFromDraws | None:
         sd = float(np.sqrt(joint.cov[i][i]))
         fit[name] = float(stats.kstest(z[:, i], "norm", args=(joint.mean[i], sd)).statistic)
     return PriorFromDraws(priors, shared, out, int(flat.shape[0]), fit)
+
+
+@functools.lru_cache(maxsize=4)
+def _posterior(file: str, mtime_ns: int) -> Any:
+    """A posterior file read once per version (``run`` and its stages ask for it)."""
+    del mtime_ns  # part of the cache key only
+    return posterior_store.load_posterior(Path(file))
 
 
 def study_priors(study: Study) -> dict[str, Prior]:
