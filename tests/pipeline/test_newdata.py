@@ -25,6 +25,7 @@ from bayescal.pipeline.newdata import (
     NEW_WINDOW,
     conditions_outside,
     new_assembled,
+    predict_as,
     predict_new,
     write_new_prediction,
 )
@@ -248,3 +249,31 @@ def test_cli_predict_writes_the_files_and_says_the_verdict(calibrated: Any, tmp_
     )
     assert late.exit_code == 2
     assert "--from" in late.output
+
+
+def test_predict_as_another_setup_holds_the_stated_accuracy(
+    calibrated: Any, tmp_path: Path
+) -> None:
+    # the other set-up: the same wall under another winter, described by its own study
+    # (its own file and column names), the flux's accuracy stated as the true noise SD
+    other = tmp_path / "other"
+    other.mkdir()
+    frame = wall_data(seed=8, phi=0.0).rename(columns={"q_si": "flux"})
+    frame.to_csv(other / "wall.csv", index=False)
+    text = _study_text("other", discrepancy=False).replace('source = "q_si"', 'source = "flux"')
+    text = text.replace('model = "white"', f'model = "white"\nsd = {NOISE_SD}')
+    (other / "study.toml").write_text(text, encoding="utf-8")
+    pred = predict_as(calibrated, load_study(other))
+    row = pred.metrics[pred.metrics["model"] == "calibrated"].iloc[0]
+    low, high = honest_range(0.95, float(row["n_eff95"]))
+    assert low <= float(row["coverage95"]) <= high
+    assert any("stated accuracy" in n for n in pred.notes)
+    unstated = tmp_path / "unstated"
+    unstated.mkdir()
+    frame.to_csv(unstated / "wall.csv", index=False)
+    (unstated / "study.toml").write_text(
+        _study_text("unstated", discrepancy=False).replace('source = "q_si"', 'source = "flux"'),
+        encoding="utf-8",
+    )
+    with pytest.raises(ConfigError, match="no stated accuracy of heat_flux_in"):
+        predict_as(calibrated, load_study(unstated))

@@ -73,4 +73,4 @@ def test_cli_scenario_prints_the_changes_and_writes_them(calibrated: Any, tmp_pa
     assert (out / "scenario-draws.csv").is_file()
     neither = CliRunner().invoke(main, ["predict", study])
     assert neither.exit_code == 2
-    assert "--data FILE or --scenario FILE" in neither.output
+    assert "--data FILE, --scenario FILE or --as STUDY" in neither.output

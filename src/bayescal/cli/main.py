@@ -285,6 +285,16 @@ def run(
     "draws, with the paired interval of each change.",
 )
 @click.option(
+    "--as",
+    "as_study",
+    type=click.Path(path_type=Path),
+    default=None,
+    help="Another study of the same building in another set-up (its data mapping, simulator "
+    "settings and outputs, e.g. the free-float phase of a box calibrated on co-heating): "
+    "predict its record with this calibration's posterior; its outputs' bands hold their "
+    "stated accuracy ([outputs.errors.NAME] sd) [default data: its own file].",
+)
+@click.option(
     "--from",
     "start",
     default=None,
@@ -327,6 +337,7 @@ def predict(
     study: Path,
     data: Path | None,
     scenario: Path | None,
+    as_study: Path | None,
     start: str | None,
     end: str | None,
     assignments: tuple[str, ...],
@@ -370,11 +381,19 @@ def predict(
                 raise ConfigError(
                     f"{key} {text!r} is not a date and time", hint="e.g. 2013-09-20T00:00"
                 ) from None
-    if data is None and scenario is None:
-        raise ConfigError("predict needs --data FILE or --scenario FILE", hint="see --help")
+    if data is None and scenario is None and as_study is None:
+        raise ConfigError(
+            "predict needs --data FILE, --scenario FILE or --as STUDY", hint="see --help"
+        )
     if data is not None and not data.is_file():
         raise ConfigError(f"{data}: no such data file", hint="give --data an existing file")
-    stem = scenario.stem if scenario is not None else data.stem if data is not None else ""
+    stem = (
+        scenario.stem
+        if scenario is not None
+        else data.stem
+        if data is not None
+        else f"as-{Path(as_study or '').resolve().name}"
+    )
     folder = out if out is not None else config.study.output_dir / f"predict-{stem}"
     if folder.exists() and not folder.is_dir():
         raise ConfigError(f"{folder} exists and is not a folder", hint="give --out a folder")
@@ -400,17 +419,33 @@ def predict(
         click.echo("\n".join(scenario_lines(result)))
         click.echo(f"wrote {folder} ({', '.join(p.name for p in written.values())})")
         return
-    assert data is not None
-    pred = predict_new(
-        load_results(config),
-        data,
-        start=window.get("--from"),
-        end=window.get("--to"),
-        fixed=_parse_assignments(assignments),
-        method=method,
-        options=options,
-        say=(lambda _: None) if quiet else click.echo,
-    )
+    if as_study is not None:
+        from bayescal.pipeline.newdata import predict_as
+
+        if method is not None:
+            raise ConfigError("--method does not apply to --as (the simulator is re-run)")
+        pred = predict_as(
+            load_results(config),
+            load_study(as_study),
+            data,
+            start=window.get("--from"),
+            end=window.get("--to"),
+            fixed=_parse_assignments(assignments),
+            options=options,
+            say=(lambda _: None) if quiet else click.echo,
+        )
+    else:
+        assert data is not None
+        pred = predict_new(
+            load_results(config),
+            data,
+            start=window.get("--from"),
+            end=window.get("--to"),
+            fixed=_parse_assignments(assignments),
+            method=method,
+            options=options,
+            say=(lambda _: None) if quiet else click.echo,
+        )
     with writing(folder):
         files = write_new_prediction(pred, folder)
     if not quiet:

@@ -73,6 +73,7 @@ from bayescal.pipeline.stages import (
 
 if TYPE_CHECKING:
     from bayescal.calibration.posterior import Posterior
+    from bayescal.config import Study
     from bayescal.discrepancy import Discrepancy
     from bayescal.pipeline.run import Results
 
@@ -82,6 +83,7 @@ __all__ = [
     "conditions_outside",
     "new_assembled",
     "posterior_draws",
+    "predict_as",
     "predict_new",
     "runs_at",
 ]
@@ -393,23 +395,41 @@ def predict_new(
         else:
             corrected = _emulator_band(new_ctx, at, results, disc.posterior, disc)
         delta = delta_series(at, disc, list(em.emulator.outputs.names))
-    nominal = nominal_run(new_ctx)
-    held = ctx.study.outputs.held_out
+    return _prediction(
+        new_ctx, band, corrected, delta, chosen, fixed, outside, tuple(notes), ctx.study
+    )
+
+
+def _prediction(
+    new_ctx: Context,
+    band: Band,
+    corrected: Band | None,
+    delta: Mapping[str, np.ndarray] | None,
+    method: str,
+    fixed: Mapping[str, float],
+    outside: tuple[str, ...],
+    notes: tuple[str, ...],
+    calibrated: Study,
+) -> NewPrediction:
+    """The dataset and metrics of a prediction of ``new_ctx``'s record (its study's
+    outputs, its nominal run), made with the calibration of ``calibrated``."""
+    record, study = new_ctx.measured, new_ctx.study
+    held = study.outputs.held_out
     ds = predictions_dataset(
         record.times,
         record.layout,
-        {o: record.outputs[o] for o in ctx.study.outputs.calibrate} | dict(record.held_out),
-        nominal,
+        {o: record.outputs[o] for o in study.outputs.calibrate} | dict(record.held_out),
+        nominal_run(new_ctx),
         band,
         record.forcing.series,
         corrected,
         delta,
         attrs={
-            "level": ctx.study.predict.level,
-            "study": ctx.study.study.name,
+            "level": calibrated.predict.level,
+            "study": calibrated.study.name,
             "held_out": ",".join(held),
             "source": str(record.source),
-            "method": chosen,
+            "method": method,
             "fixed": ",".join(f"{k}={v:g}" for k, v in fixed.items()),
         },
     )
@@ -418,7 +438,111 @@ def predict_new(
     metrics["window"] = metrics["window"].replace({"test": NEW_WINDOW})
     label = np.where(ds["window"].values == "test", NEW_WINDOW, ds["window"].values)
     ds = ds.assign_coords(window=("time", label.astype(str), ds["window"].attrs))
-    return NewPrediction(ds, metrics, chosen, outside, record, tuple(notes))
+    return NewPrediction(ds, metrics, method, outside, record, notes)
+
+
+def predict_as(
+    results: Results,
+    other: Study,
+    data: Path | None = None,
+    *,
+    start: pd.Timestamp | None = None,
+    end: pd.Timestamp | None = None,
+    fixed: Mapping[str, float] | None = None,
+    options: Options | None = None,
+    say: Say | None = None,
+) -> NewPrediction:
+    """Predict another experiment's record with this calibration: ``predict --as OTHER``.
+
+    ``other`` is a study of the same building in another set-up (the test box
+    calibrated on its co-heating phase, predicting its free-float phase): its
+    data mapping, simulator settings (mode, fixed inputs) and outputs. Its
+    parameters take this calibration's posterior draws where the names agree,
+    their nominal values elsewhere (``fixed`` sets one in every draw); the
+    simulator is re-run at ``[predict] runs`` draws on its record (``data``,
+    default its own file). Its outputs are not those the calibration learnt an
+    error model for, so each band holds the parameters' uncertainty and the
+    output's **stated** accuracy (``[outputs.errors.NAME] sd`` of ``other``,
+    required), like a held-out sensor's; no discrepancy carries over.
+
+    Raises
+    ------
+    ConfigError
+        No finished calibration, an output of ``other`` without a stated
+        accuracy, no shared parameter, or draws outside ``other``'s bounds.
+    """
+    from bayescal.config import build_simulator, nominal_parameters
+
+    tell = say or (lambda _: None)
+    ctx = (
+        results.context
+        if options is None
+        else dataclasses.replace(results.context, options=options)
+    )
+    posterior = results.posterior
+    if posterior is None:
+        raise ConfigError(
+            f"{ctx.out} holds no finished calibration",
+            hint=f"run `bayescal run {ctx.study.path}` first",
+        )
+    outputs = (*other.outputs.calibrate, *other.outputs.held_out)
+    missing = [o for o in outputs if other.outputs.noise_sd(o) is None]
+    if missing:
+        raise ConfigError(
+            f"--as {other.path}: no stated accuracy of {', '.join(missing)}",
+            hint=f"set [outputs.errors.{missing[0]}] sd = ... in {Path(other.path or '').name}: "
+            "the band of an output the calibration did not learn holds the sensor's accuracy",
+        )
+    names = list(posterior.names)
+    wanted = list(other.priors())
+    shared = [n for n in wanted if n in names]
+    if not shared:
+        raise ConfigError(
+            f"--as {other.path}: its parameters {', '.join(wanted)} share none with the "
+            f"calibration's {', '.join(names)}"
+        )
+    fixed = dict(fixed or {})
+    nominal = nominal_parameters(other)
+    flat = posterior.draws.reshape(-1, len(names))
+    pick = np.unique(
+        np.linspace(0, flat.shape[0] - 1, min(ctx.study.predict.runs, flat.shape[0])).astype(int)
+    )
+    columns = []
+    for n in wanted:
+        if n in fixed:
+            columns.append(np.full(pick.size, fixed[n]))
+        elif n in names:
+            columns.append(flat[pick, names.index(n)])
+        else:
+            columns.append(np.full(pick.size, nominal[n]))
+    theta = np.column_stack(columns)
+    layout = ctx.measured.layout
+    anchor = ctx.measured.times[int(layout.train_starts[0])]
+    record = load_new_record(other, data or Path(other.data.file), anchor, start=start, end=end)
+    other_ctx = dataclasses.replace(
+        ctx, study=other, simulator=build_simulator(other), measured=record
+    )
+    notes = [
+        f"the parameters {', '.join(shared)} from the posterior"
+        + (
+            f"; {', '.join(n for n in wanted if n not in names)} at nominal"
+            if len(shared) < len(wanted)
+            else ""
+        )
+        + f"; the bands hold the stated accuracy of {', '.join(outputs)}, no model error"
+    ]
+    name = Path(other.path or "").name
+    tell(f"predict as {name}: {pick.size} posterior draws on {record.source.name}")
+    runs, _ = runs_at(other_ctx, theta)
+    measured = {**record.outputs, **record.held_out}
+    band = held_out_band(
+        record.layout,
+        {o: runs[o] for o in outputs},
+        {o: held_out_sd(other_ctx, o) for o in outputs},
+        {o: measured[o] for o in outputs},
+        ctx.study.predict.level,
+    )
+    return _prediction(other_ctx, band, None, None, "simulator", fixed, (), tuple(notes), ctx.study)
 
 
 #: The columns of predictions.csv per output, after ``{output}_``.
