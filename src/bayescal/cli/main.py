@@ -233,7 +233,9 @@ def run(
 
     Every stage writes its results into the study's output folder; running
     again reuses stages whose inputs did not change and resumes interrupted
-    simulations. A log is kept in OUTPUT_DIR/bayescal.log.
+    simulations. A log is kept in OUTPUT_DIR/bayescal.log. Progress is drawn as
+    bars on a terminal; redirected to a file (bayescal run STUDY > log 2>&1) it is
+    plain lines: one when a stage starts, one every 10 s or so, one when it ends.
     """
     from bayescal.cli.progress import describe, progress_options
     from bayescal.config import load_study
