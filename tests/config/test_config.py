@@ -280,6 +280,20 @@ BAD = [
         r"scheduler applies to backend 'dask'",
     ),
     (_pop("study"), r"study: missing required key"),
+    # names the calibration gives its own coordinates and variables
+    *(
+        (
+            lambda raw, name=name: raw["parameters"].__setitem__(
+                name, raw["parameters"].pop("cp_fb")
+            ),
+            rf"parameters\.{name}: the name '{name}' is reserved .*\(lambda, lambda_star, phi",
+        )
+        for name in ("lambda", "lambda_star", "phi", "delta_rel", "lp", "chain", "phi_heat_flux_in")
+    ),
+    (
+        _set("derived", value={"noise_sd": {"expression": "k_cb"}}),
+        r"derived\.noise_sd: the name 'noise_sd' is reserved .*rename the quantity",
+    ),
 ]
 
 
@@ -522,3 +536,12 @@ def test_every_field_is_documented_with_examples() -> None:
     assert undocumented == []
     schema = Study.model_json_schema()  # the reference generator's input must build
     assert "simulator" in schema["properties"]
+
+
+def test_names_near_the_reserved_ones_are_parameters_like_any() -> None:
+    def rename(raw: dict[str, Any]) -> None:
+        raw["parameters"]["phi_wall"] = raw["parameters"].pop("cp_fb")
+        raw["parameters"]["lambda_glass"] = raw["parameters"].pop("cp_cb")
+
+    study = _validate(rename)
+    assert set(study.parameters) == {"k_cb", "phi_wall", "lambda_glass"}

@@ -48,7 +48,7 @@ from bayescal.config.data import DataSection
 from bayescal.config.discrepancy import DiscrepancySection
 from bayescal.config.messages import format_errors
 from bayescal.config.outputs import OutputsSection
-from bayescal.config.parameters import DerivedSpec, Parameter
+from bayescal.config.parameters import DerivedSpec, Parameter, reserved_name_problems
 from bayescal.config.screening import ScreeningSection
 from bayescal.config.simulators import SimulatorSection
 from bayescal.config.targets import KIND_UNITS, SENSOR_PREFIX, normal_unit, parse_sensor_target
@@ -116,7 +116,8 @@ def _length(value: object) -> object:
 
 class PeriodsSection(Section):
     """``[periods]``: warm-up, period length and the held-out test window (give one of
-    ``test_samples`` and ``test_fraction``)."""
+    ``test_samples`` and ``test_fraction``). At least two whole training periods must
+    lie between the warm-up and the test window."""
 
     length: Annotated[timedelta | int, BeforeValidator(_length)] = field_doc(
         "Period length: a duration (multiple of data.step) or a number of samples.",
@@ -412,6 +413,8 @@ class Study(Section):
     def _cross_checks(self) -> Study:
         problems = _target_problems(self) + _output_problems(self) + _period_problems(self)
         problems += _derived_problems(self)
+        problems += reserved_name_problems(self.parameters, self.outputs.calibrate)
+        problems += reserved_name_problems(self.derived, self.outputs.calibrate, "derived")
         problems += _sampler_problems(self) + _aggregate_problems(self)
         t = len(self.calibrated)
         if t and self.design.runs < t + 2:
