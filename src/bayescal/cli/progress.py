@@ -41,6 +41,7 @@ __all__ = [
     "progress_options",
     "screening_text",
     "study_summary",
+    "time_lines",
 ]
 
 Tick = Callable[[int], None]
@@ -128,6 +129,23 @@ def budget_line(needs: Any) -> str:
         f"needs: about {format_bytes(memory)} of memory, {format_bytes(disk)} of disk "
         f"(largest: {largest}; limits: [runner] max_memory, max_disk)"
     )
+
+
+def time_lines(times: Any) -> list[str]:
+    """``time: about 30 s ...`` (:func:`bayescal.pipeline.budget.estimate_time`), and a
+    ``warning: ...`` line naming the key to change where it runs over an hour."""
+    from bayescal.pipeline.budget import format_seconds
+
+    parts = ", ".join(f"{part.what} {format_seconds(part.seconds)}" for part in times.parts)
+    runs = times.simulator_runs
+    lines = [
+        f"time: about {format_seconds(times.seconds)} for the emulator and the MCMC ({parts}; "
+        "an order of magnitude from a per-sweep cost model timed on the wall example), "
+        f"plus {runs} simulator run{'s' if runs != 1 else ''} not timed here "
+        "(bayescal simulate runs one)"
+    ]
+    warning = times.warning()
+    return [*lines, f"warning: {warning}"] if warning else lines
 
 
 def _simulator_line(sim: Any) -> str:

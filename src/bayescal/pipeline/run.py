@@ -35,7 +35,7 @@ from bayescal.config import Study
 from bayescal.design import Design
 from bayescal.discrepancy import Discrepancy
 from bayescal.errors import BayescalError, ConfigError, DataError
-from bayescal.pipeline.budget import check_budget
+from bayescal.pipeline.budget import check_budget, estimate_time
 from bayescal.pipeline.keys import stage_keys
 from bayescal.pipeline.stages import (
     Context,
@@ -528,6 +528,9 @@ def run(
     ctx = prepare(study, options)
     needs = check_budget(study, ctx.measured, ctx.out)  # before any stage allocates
     tell = say or (lambda _: None)
+    long_run = estimate_time(study, ctx.measured).warning()
+    if long_run is not None:
+        tell(f"warning: {long_run}")
     with writing(ctx.out, sum(need.disk for need in needs)):
         ctx.out.mkdir(parents=True, exist_ok=True)
         with OutputLock(ctx.out, command="run") as lock:
