@@ -40,6 +40,7 @@ from bayescal.config.base import (
     Duration,
     Section,
     field_doc,
+    path_problem,
     raise_problems,
     resolve_path,
 )
@@ -727,9 +728,11 @@ def load_study(path: str | os.PathLike[str]) -> Study:
     """
     given = Path(path)
     file = given / STUDY_FILE if given.is_dir() else given
-    if not file.is_file():
-        what = f"no {STUDY_FILE} in folder {given}" if given.is_dir() else "file not found"
-        raise ConfigError(what, hint="give the study file or its folder", source=str(file))
+    problem = path_problem(file)
+    if problem is not None:
+        if problem == "file not found" and given.is_dir():
+            problem = f"no {STUDY_FILE} in folder {given}"
+        raise ConfigError(problem, hint="give the study file or its folder", source=str(file))
     try:
         raw = tomllib.loads(_study_text(file.read_bytes()))
     except UnicodeDecodeError as exc:
