@@ -265,3 +265,19 @@ def test_validate_twin_house_in_place(tmp_path: Path) -> None:
     assert "32 training periods of 144 samples" in out
     assert "test window 1000" in out
     assert "gaps: none" in out
+
+
+def test_validate_explains_a_warm_up_longer_than_asked(tmp_path: Path) -> None:
+    # 23 h of warm-up asked; the first whole daily period starts 1 h later: the grid of
+    # periods ends where the test window's period begins, so 2 samples are left over.
+    folder = _copy(tmp_path)
+    toml = folder / "study.toml"
+    toml.write_text(toml.read_text().replace('warmup = "1D"', 'warmup = "23h"'))
+    code, out, err = _run("validate", str(folder))
+    assert code == 0, err
+    line = next(line for line in out.splitlines() if line.startswith("periods: "))
+    assert line.startswith(
+        "periods: warm-up 48 samples (46 of [periods] warmup = 23h + 2 left before the first "
+        "whole period: the periods lie on a grid that ends where the test window's periods "
+        "begin), 4 training periods of 48 samples"
+    )

@@ -84,8 +84,8 @@ def study_summary(study: Any, measured: Any) -> str:
         f"  calibrated outputs: {', '.join(study.outputs.calibrate)}",
         f"clock: step {format_duration(step)}, {measured.times[0]} to {measured.times[-1]} UTC, "
         f"{measured.n} samples ({format_duration(measured.n * step)})",
-        f"periods: warm-up {first} samples, {lay.m_star} training periods of {lay.period} "
-        "samples"
+        f"periods: warm-up {first} samples{_leftover(first, lay.warmup, step)}, "
+        f"{lay.m_star} training periods of {lay.period} samples"
         + (f" ({dropped} more dropped: missing data)" if dropped else "")
         + f", test window {lay.test} samples",
     ]
@@ -116,6 +116,20 @@ def study_summary(study: Any, measured: Any) -> str:
         lines.append(f"excluded (data.exclude): {len(excluded)} window(s)")
         lines += [f"  {window.describe()}" for window in excluded]
     return "\n".join(lines)
+
+
+def _leftover(first: int, warmup: int, step: Any) -> str:
+    """`` (192 of [periods] warmup = 4D + 47 before the first whole period ...)`` where the
+    first training period starts after the warm-up asked for; ``""`` where it does not."""
+    from bayescal.data.align import format_duration
+
+    if first == warmup:
+        return ""
+    return (
+        f" ({warmup} of [periods] warmup = {format_duration(warmup * step)} + {first - warmup} "
+        "left before the first whole period: the periods lie on a grid that ends where the "
+        "test window's periods begin)"
+    )
 
 
 def budget_line(needs: Any) -> str:
