@@ -180,6 +180,14 @@ def test_the_time_estimate_counts_the_emulators_chains_and_the_difference_proces
     )
     parts = {p.what: p for p in estimate_time(delta, measured).parts}
     assert parts["difference process"].seconds == pytest.approx(parts["calibration"].seconds)
+    ar1 = (
+        'calibrate = ["heat_flux_in"]',
+        'calibrate = ["heat_flux_in"]\nerrors.heat_flux_in.model = "ar1"',
+    )
+    with_phi = {
+        p.what: p for p in estimate_time(load_study(_wall(tmp_path / "e", ar1)), measured).parts
+    }
+    assert with_phi["calibration"].detail.endswith("× 6 coordinates")  # and phi
 
 
 def test_run_says_the_warning_before_its_first_stage(tmp_path: Path) -> None:

@@ -119,8 +119,9 @@ def study_summary(study: Any, measured: Any) -> str:
 
 
 def _leftover(first: int, warmup: int, step: Any) -> str:
-    """`` (192 of [periods] warmup = 4D + 47 before the first whole period ...)`` where the
-    first training period starts after the warm-up asked for; ``""`` where it does not."""
+    """`` (192 of [periods] warmup = 4D + 12 left before the first whole period: ...)``
+    where the first period of the grid starts after the warm-up asked for (the samples
+    between join the warm-up, :mod:`bayescal.periods`); ``""`` where it does not."""
     from bayescal.data.align import format_duration
 
     if first == warmup:

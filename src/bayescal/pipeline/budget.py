@@ -356,7 +356,7 @@ def estimate_time(study: Study, measured: MeasuredData) -> TimeEstimate:
     simulate`` runs one.
     """
     s = study
-    t, runs, q = len(s.parameters), int(s.design.runs), len(s.outputs.calibrate)
+    t, runs, q = len(s.calibrated), int(s.design.runs), len(s.outputs.calibrate)
     lay = measured.layout
     m = int(lay.m_star)
     em, cal = s.emulator, s.calibration
@@ -376,7 +376,8 @@ def estimate_time(study: Study, measured: MeasuredData) -> TimeEstimate:
         size = (float(runs) ** 2 + float(runs) * m + float(m) ** 2) / _WALL
         detail = f"a gradient search per basis vector, {basis}{guess}, {runs} runs × {m} periods"
         parts.append(TimeNeed("emulator", "design.runs", detail, _MAP_PER_BASIS * basis * size))
-    d = t + 1 + q + sum(1 for e in s.outputs.errors.values() if e.model == "ar1")
+    errors = s.outputs.errors
+    d = t + 1 + q + sum(1 for n in s.outputs.calibrate if n in errors and errors[n].model == "ar1")
     move = _CALIBRATION_MOVE + _ALGEBRA * basis * (float(runs) ** 2 + float(runs) * m)
     sweeps = cal.burn + cal.samples
     key = _out_of_proportion(
