@@ -39,8 +39,25 @@ def test_validate_fixture_summary() -> None:
         "clock: step 30min, 2012-01-31T23:00:00 to 2012-02-06T22:30:00 UTC, 288 samples (6D)",
         "warm-up 48 samples, 4 training periods of 48 samples, test window 48 samples",
         "gaps: none",
+        "time: about ",
+        "an order of magnitude from a per-sweep cost model",
+        "plus 70 simulator runs not timed here",  # 20 design + 50 predict runs
     ):
         assert expected in out
+    assert "warning" not in out
+
+
+def test_validate_warns_of_a_run_of_hours(tmp_path: Path) -> None:
+    folder = _copy(tmp_path)
+    toml = folder / "study.toml"
+    long_chains = "\n[calibration]\nchains = 10000\nburn = 900\nsamples = 100\n"
+    toml.write_text(toml.read_text() + long_chains)
+    code, out, err = _run("validate", str(folder))
+    assert code == 0, err
+    warning = [line for line in out.splitlines() if line.startswith("warning: ")]
+    assert len(warning) == 1
+    assert warning[0].startswith("warning: calibration.chains: the calibration alone may take")
+    assert "(10000 chains × 1000 sweeps × 5 coordinates)" in warning[0]
 
 
 def _copy(tmp_path: Path) -> Path:
@@ -248,3 +265,19 @@ def test_validate_twin_house_in_place(tmp_path: Path) -> None:
     assert "32 training periods of 144 samples" in out
     assert "test window 1000" in out
     assert "gaps: none" in out
+
+
+def test_validate_explains_a_warm_up_longer_than_asked(tmp_path: Path) -> None:
+    # 23 h of warm-up asked; the first whole daily period starts 1 h later: the grid of
+    # periods ends where the test window's period begins, so 2 samples are left over.
+    folder = _copy(tmp_path)
+    toml = folder / "study.toml"
+    toml.write_text(toml.read_text().replace('warmup = "1D"', 'warmup = "23h"'))
+    code, out, err = _run("validate", str(folder))
+    assert code == 0, err
+    line = next(line for line in out.splitlines() if line.startswith("periods: "))
+    assert line.startswith(
+        "periods: warm-up 48 samples (46 of [periods] warmup = 23h + 2 left before the first "
+        "whole period: the periods lie on a grid that ends where the test window's periods "
+        "begin), 4 training periods of 48 samples"
+    )

@@ -2,13 +2,17 @@
 
 from __future__ import annotations
 
+import io
 from pathlib import Path
 
 import numpy as np
 import pytest
+from click.testing import CliRunner
 
 import sims_for_tests as sims
-from bayescal.cli.progress import simulation_bar
+from bayescal.cli import main
+from bayescal.cli import progress as progress_module
+from bayescal.cli.progress import mcmc_bar, progress_options, simulation_bar
 from bayescal.design import UniformPrior, latin_hypercube
 from bayescal.pipeline import Results
 from bayescal.runner import run_design
@@ -20,18 +24,107 @@ FORCING = Forcing(3600.0, {"temp_air_out": 10.0 + 5.0 * np.sin(np.arange(N) / 3.
 DESIGN = latin_hypercube({"a": UniformPrior(0.0, 1.0), "b": UniformPrior(-1.0, 1.0)}, 10, seed=1)
 
 
-def test_simulation_bar_counts_runs_and_failures(
-    tmp_path: Path, capsys: pytest.CaptureFixture[str]
-) -> None:
-    progress, close = simulation_bar(10, desc="runs")
+class Terminal(io.StringIO):
+    """A stream that says it is a terminal."""
+
+    def isatty(self) -> bool:
+        return True
+
+
+class Clock:
+    """A clock that advances ``step`` seconds each time it is read."""
+
+    def __init__(self, step: float) -> None:
+        self.now, self.step = 0.0, step
+
+    def __call__(self) -> float:
+        self.now += self.step
+        return self.now
+
+
+def test_simulation_bar_counts_runs_and_failures(tmp_path: Path) -> None:
+    stream = Terminal()
+    progress, close = simulation_bar(10, desc="runs", stream=stream)
     results = run_design(
         sims.Failing(), FORCING, DESIGN, cache_dir=tmp_path, backend="serial", progress=progress
     )
     close()
-    err = capsys.readouterr().err
+    err = stream.getvalue()
     assert results.n_failed == 1
     assert "runs: 100%" in err
     assert "failed=1" in err
+    assert "\r" in err  # a bar on a terminal
+
+
+def test_without_a_terminal_simulations_are_plain_lines(tmp_path: Path) -> None:
+    stream = io.StringIO()
+    progress, close = simulation_bar(10, desc="runs", stream=stream)
+    results = run_design(
+        sims.Failing(), FORCING, DESIGN, cache_dir=tmp_path, backend="serial", progress=progress
+    )
+    close()
+    text = stream.getvalue()
+    assert results.n_failed == 1
+    assert "\r" not in text
+    lines = text.splitlines()
+    assert lines[0] == "runs: started, 10 runs"
+    assert lines[-1].startswith("runs: finished 10/10 runs in ")
+    assert lines[-1].endswith(", 1 failed")
+    assert len(lines) == 2  # the runs took far less than 10 s: no line between
+
+
+@pytest.mark.parametrize(("ticks", "step", "most"), [(100_000, 0.01, 40), (200_000, 0.18, 100)])
+def test_without_a_terminal_mcmc_progress_is_bounded(ticks: int, step: float, most: int) -> None:
+    # ticks over 1000 s or 10 h of a fake clock: a line every 10 s at most (every tenth
+    # of the time elapsed after 100 s), not one per tick.
+    stream = io.StringIO()
+    factory = mcmc_bar(quiet=False, stream=stream)
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(progress_module, "monotonic", Clock(step))
+        tick, close = factory("calibrate", ticks)
+        for done in range(1, ticks + 1):
+            tick(done)
+        close()
+    text = stream.getvalue()
+    assert "\r" not in text
+    lines = text.splitlines()
+    assert 12 <= len(lines) <= most
+    assert lines[0] == f"calibrate: started, {ticks} it"
+    assert lines[-1].startswith(f"calibrate: finished {ticks}/{ticks} it in ")
+    assert lines[1].startswith("calibrate: ")
+    assert ", 10 s, about " in lines[1]  # the first line after 10 s, with the time left
+    assert lines[-2].endswith(" left")
+
+
+def test_without_a_terminal_a_growing_phase_grows_its_total() -> None:
+    stream = io.StringIO()
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(progress_module, "monotonic", Clock(20.0))
+        tick, close = mcmc_bar(quiet=False, stream=stream)("discrepancy", 10)
+        tick(15)
+        close()
+    lines = stream.getvalue().splitlines()
+    assert lines[1].startswith("discrepancy: 15/15 it (100 %)")
+    assert lines[-1].startswith("discrepancy: finished 15/15 it")
+
+
+def test_quiet_writes_nothing() -> None:
+    stream = io.StringIO()
+    options = progress_options(quiet=True, stream=stream)
+    assert options["progress"] is None
+    tick, close = options["mcmc_progress"]("calibrate", 100)
+    tick(50)
+    close()
+    assert stream.getvalue() == ""
+
+
+def test_a_terminal_gets_a_bar() -> None:
+    stream = Terminal()
+    tick, close = mcmc_bar(quiet=False, stream=stream)("emulator", 100)
+    tick(100)
+    close()
+    assert "\r" in stream.getvalue()
+    assert "emulator: 100%" in stream.getvalue()
 
 
 def test_comparison_table_keeps_long_variant_names_apart() -> None:
@@ -145,3 +238,36 @@ def test_comparison_table_marks_a_variant_whose_calibration_failed() -> None:
     )
     assert lines[6].startswith("white: worse by 20.0")
     assert "note: ar1: its calibration FAILED ..." in lines
+
+
+#: Short chains for the wall example: the log's shape, not the calibration, is tested.
+SHORT = """
+[emulator]
+pca_variance = 0.999
+burn = 100
+samples = 100
+
+[calibration]
+chains = 4
+burn = 200
+samples = 200
+max_samples = 200
+"""
+
+
+def test_a_redirected_run_writes_no_carriage_returns(tmp_path: Path) -> None:
+    runner = CliRunner()  # its standard error is no terminal, like `bayescal run S > log 2>&1`
+    folder = tmp_path / "wall"
+    assert runner.invoke(main, ["init", "wall", str(folder)]).exit_code == 0
+    text = (folder / "study.toml").read_text(encoding="utf-8")
+    (folder / "study.toml").write_text(text[: text.index("[emulator]")] + SHORT, "utf-8")
+    result = runner.invoke(
+        main, ["run", str(folder), "--until", "calibrate", "--backend", "serial"]
+    )
+    assert result.exit_code == 0, result.output
+    log = result.stdout + result.stderr
+    assert "\r" not in log
+    for stage in ("simulations", "emulator", "calibration"):
+        assert f"{stage}: started, " in result.stderr
+        assert f"{stage}: finished " in result.stderr
+    assert len(result.stderr.splitlines()) < 3 * 100

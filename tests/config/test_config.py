@@ -280,6 +280,20 @@ BAD = [
         r"scheduler applies to backend 'dask'",
     ),
     (_pop("study"), r"study: missing required key"),
+    # names the calibration gives its own coordinates and variables
+    *(
+        (
+            lambda raw, name=name: raw["parameters"].__setitem__(
+                name, raw["parameters"].pop("cp_fb")
+            ),
+            rf"parameters\.{name}: the name '{name}' is reserved .*\(lambda, lambda_star, phi",
+        )
+        for name in ("lambda", "lambda_star", "phi", "delta_rel", "lp", "chain", "phi_heat_flux_in")
+    ),
+    (
+        _set("derived", value={"noise_sd": {"expression": "k_cb"}}),
+        r"derived\.noise_sd: the name 'noise_sd' is reserved .*rename the quantity",
+    ),
 ]
 
 
@@ -358,6 +372,10 @@ def test_missing_study(tmp_path: Path) -> None:
         load_study(tmp_path)
     with pytest.raises(ConfigError, match="file not found"):
         load_study(tmp_path / "other.toml")
+    (tmp_path / "study.toml").symlink_to("again.toml")
+    (tmp_path / "again.toml").symlink_to("study.toml")
+    with pytest.raises(ConfigError, match=r"symbolic link loop \(study\.toml -> again\.toml"):
+        load_study(tmp_path)
 
 
 def test_modelica_and_epw_sources() -> None:
@@ -522,3 +540,25 @@ def test_every_field_is_documented_with_examples() -> None:
     assert undocumented == []
     schema = Study.model_json_schema()  # the reference generator's input must build
     assert "simulator" in schema["properties"]
+
+
+def test_names_near_the_reserved_ones_are_parameters_like_any() -> None:
+    def rename(raw: dict[str, Any]) -> None:
+        raw["parameters"]["phi_wall"] = raw["parameters"].pop("cp_fb")
+        raw["parameters"]["lambda_glass"] = raw["parameters"].pop("cp_cb")
+
+    study = _validate(rename)
+    assert set(study.parameters) == {"k_cb", "phi_wall", "lambda_glass"}
+
+
+def test_path_problem_says_why_a_file_cannot_be_read(tmp_path: Path) -> None:
+    from bayescal.config.base import path_problem
+
+    (tmp_path / "file.idf").write_text("x", encoding="utf-8")
+    (tmp_path / "loop.idf").symlink_to("loop.idf")
+    (tmp_path / "to-file.idf").symlink_to("file.idf")
+    assert path_problem(tmp_path / "file.idf") is None
+    assert path_problem(tmp_path / "to-file.idf") is None
+    assert path_problem(tmp_path) == "not a file"
+    assert path_problem(tmp_path / "none.idf") == "file not found"
+    assert path_problem(tmp_path / "loop.idf") == "symbolic link loop (loop.idf -> loop.idf)"

@@ -430,10 +430,14 @@ def test_after_a_boundary_gap_longer_than_a_period_the_warm_up_is_dropped(
     def hole(frame: pd.DataFrame) -> None:
         frame.loc[60:120, "T_se"] = np.nan  # 61 samples, over one period (48)
 
-    measured = load_measured(load_study(_study_copy(tmp_path, hole)))
+    # No test window, so that two periods are left (a calibration needs two).
+    no_test = _study_copy(
+        tmp_path, hole, lambda t: t.replace("test_samples = 48", "test_samples = 0")
+    )
+    measured = load_measured(load_study(no_test))
     # touched: [48, 96), [96, 144); the warm-up of 48 samples after sample 120: [144, 192)
     assert measured.layout.dropped_starts.tolist() == [48, 96, 144]
-    assert measured.layout.train_starts.tolist() == [192]
+    assert measured.layout.train_starts.tolist() == [192, 240]
     assert np.isfinite(measured.forcing["temp_surf_out"]).all()
 
 

@@ -99,7 +99,8 @@ def _meter_study(root: Path, **column: Any) -> dict[str, Any]:
 
 
 def test_study_reads_quarter_hour_kwh_as_hourly_joules(tmp_path: Path) -> None:
-    times = pd.date_range("2013-01-01 00:15", periods=4 * 24 * 3, freq="15min")
+    # four days: a test day and the two whole training days a study needs
+    times = pd.date_range("2013-01-01 00:15", periods=4 * 24 * 4, freq="15min")
     energy = np.round(1.0 + 0.5 * np.sin(np.arange(times.size) / 7.0), 3)  # [kWh]
     pd.DataFrame({"time": times, "T_out": 1.0, "E": energy}).to_csv(
         tmp_path / "meters.csv", index=False
@@ -111,7 +112,7 @@ def test_study_reads_quarter_hour_kwh_as_hourly_joules(tmp_path: Path) -> None:
     expected = hourly.reindex(clock).to_numpy() * 3.6e6
     got = measured.outputs["electricity"]
     ok = np.isfinite(got)
-    assert ok.sum() >= 3 * 24 - 2  # the first clock instant may lack its first readings
+    assert ok.sum() >= 4 * 24 - 2  # the first clock instant may lack its first readings
     np.testing.assert_allclose(got[ok], expected[ok], rtol=1e-12)
 
 

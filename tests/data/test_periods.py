@@ -1,8 +1,11 @@
 """Period layout: warm-up, whole training periods ending at the test window, test cover."""
 
 import numpy as np
+import pandas as pd
 import pytest
 
+from bayescal.config.study import PeriodsSection
+from bayescal.data.measured import layout_for
 from bayescal.errors import DataError
 from bayescal.periods import layout_periods
 
@@ -69,3 +72,20 @@ def test_too_short_record_is_a_clear_error() -> None:
 def test_all_periods_missing_is_an_error() -> None:
     with pytest.raises(DataError, match="all 3 training periods contain missing"):
         layout_periods(30, 10, warmup=0, test=0, missing=np.ones(30, dtype=bool))
+
+
+def test_a_study_needs_two_training_periods() -> None:
+    # A day of warm-up, 3 daily periods, no test window; gaps in two of them leave one.
+    periods = PeriodsSection(length="1D", warmup="1D", test_samples=0)
+    step = pd.Timedelta("30min")
+    assert layout_for(4 * 48, step, periods).m_star == 3
+    missing = np.zeros(4 * 48, dtype=bool)
+    missing[[50, 100]] = True
+    with pytest.raises(DataError) as info:
+        layout_for(4 * 48, step, periods, missing)
+    text = info.value.one_line()
+    assert "[periods] leaves 1 training period (2 more dropped: missing data)" in text
+    assert "needs at least 2" in text
+    assert "data.max_gap_interpolate" in text
+    missing[100] = False
+    assert layout_for(4 * 48, step, periods, missing).m_star == 2

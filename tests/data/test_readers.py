@@ -130,6 +130,27 @@ def test_csv_binary_and_missing_files(tmp_path: Path) -> None:
         read_csv(tmp_path / "nope.csv", "time")
 
 
+def test_symbolic_link_loops_and_broken_links_are_named(tmp_path: Path) -> None:
+    (tmp_path / "a.csv").symlink_to("b.csv")
+    (tmp_path / "b.csv").symlink_to("a.csv")
+    with pytest.raises(DataError) as info:
+        read_csv(tmp_path / "a.csv", "time")
+    text = info.value.one_line()
+    assert "symbolic link loop (a.csv -> b.csv -> a.csv)" in text
+    assert "file not found" not in text
+    assert "point it at the file itself" in text
+    (tmp_path / "up").symlink_to("down")
+    (tmp_path / "down").symlink_to("up")  # a loop in a folder of the path
+    with pytest.raises(DataError, match="symbolic link loop in a folder on the path"):
+        read_parquet(tmp_path / "up" / "x.parquet", "time")
+    (tmp_path / "gone.csv").symlink_to("deleted.csv")
+    with pytest.raises(DataError, match=r"broken symbolic link to 'deleted\.csv'"):
+        read_csv(tmp_path / "gone.csv", "time")
+    (tmp_path / "real.csv").write_text("time,a\n2020-01-01 00:00,1\n", encoding="utf-8")
+    (tmp_path / "link.csv").symlink_to("real.csv")  # a link to a file is read as the file
+    assert read_csv(tmp_path / "link.csv", "time")["a"].tolist() == [1.0]
+
+
 @pytest.mark.parametrize("encoding", ["utf-16", "utf-16-le", "utf-16-be"])
 def test_csv_in_utf16_is_read(tmp_path: Path, encoding: str) -> None:
     """Excel's "Unicode text" export (UTF-16, tab-separated) reads like its UTF-8 twin."""

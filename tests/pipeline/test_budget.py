@@ -17,7 +17,9 @@ from bayescal.pipeline.budget import (
     MEMORY_VARIABLE,
     check_budget,
     estimate,
+    estimate_time,
     format_bytes,
+    format_seconds,
     machine_memory,
 )
 
@@ -127,3 +129,74 @@ def test_the_message_names_the_key_out_of_proportion(tmp_path: Path) -> None:
             check_budget(study, measured)
         assert str(info.value).count(named) == 1
         assert f"lower {named.split(' = ')[0]}," in str(info.value)
+
+
+def test_the_time_estimate_scales_with_the_chains_and_warns_past_an_hour(tmp_path: Path) -> None:
+    study = load_study(_wall(tmp_path / "4"))
+    measured = load_measured(study)
+    plain = estimate_time(study, measured)
+    parts = {part.what: part for part in plain.parts}
+    assert set(parts) == {"emulator", "calibration"}
+    assert parts["calibration"].detail == "4 chains × 3000 sweeps × 5 coordinates"
+    # the shipped example runs its emulator and MCMC in about half a minute here
+    assert 5.0 < plain.seconds < 300.0
+    assert plain.warning() is None
+    assert plain.simulator_runs == 30 + 50  # the design and the predict runs, not timed
+    many = load_study(_wall(tmp_path / "10000", ("chains = 4", "chains = 10000")))
+    big = estimate_time(many, measured)
+    by = {part.what: part for part in big.parts}
+    assert by["calibration"].seconds == pytest.approx(2500 * parts["calibration"].seconds)
+    assert by["emulator"].seconds == parts["emulator"].seconds
+    warning = big.warning()
+    assert warning is not None
+    assert warning.startswith("calibration.chains: the calibration alone may take about ")
+    assert "10000 chains × 3000 sweeps" in warning
+    assert "lower calibration.chains" in warning
+    assert format_seconds(40) == "40 s"
+    assert format_seconds(12 * 3600) == "12 h"
+
+
+def test_the_time_estimate_counts_the_emulators_chains_and_the_difference_process(
+    tmp_path: Path,
+) -> None:
+    base = load_study(_wall(tmp_path / "a"))
+    measured = load_measured(base)
+    mcmc = load_study(_wall(tmp_path / "b", ("[emulator]", '[emulator]\ntraining = "mcmc"')))
+    emulator = {p.what: p for p in estimate_time(mcmc, measured).parts}["emulator"]
+    assert emulator.key == "emulator.burn"  # 500 of 500, samples 500 of 1000 by default
+    assert emulator.detail.startswith("2 chains × 1000 sweeps × ")
+    longer = load_study(
+        _wall(
+            tmp_path / "c",
+            ("[emulator]", '[emulator]\ntraining = "mcmc"'),
+            ("samples = 500", "samples = 5000"),
+        )
+    )
+    slower = {p.what: p for p in estimate_time(longer, measured).parts}["emulator"]
+    assert slower.seconds == pytest.approx(emulator.seconds * (500 + 5000) / (500 + 500))
+    assert slower.key == "emulator.samples"
+    delta = load_study(
+        _wall(tmp_path / "d", ("[calibration]", "[discrepancy]\nenabled = true\n\n[calibration]"))
+    )
+    parts = {p.what: p for p in estimate_time(delta, measured).parts}
+    assert parts["difference process"].seconds == pytest.approx(parts["calibration"].seconds)
+    ar1 = (
+        'calibrate = ["heat_flux_in"]',
+        'calibrate = ["heat_flux_in"]\nerrors.heat_flux_in.model = "ar1"',
+    )
+    with_phi = {
+        p.what: p for p in estimate_time(load_study(_wall(tmp_path / "e", ar1)), measured).parts
+    }
+    assert with_phi["calibration"].detail.endswith("× 6 coordinates")  # and phi
+
+
+def test_run_says_the_warning_before_its_first_stage(tmp_path: Path) -> None:
+    long_chains = (
+        "chains = 4\nburn = 1000\nsamples = 2000",
+        "chains = 10000\nburn = 900\nsamples = 100",
+    )
+    study = load_study(_wall(tmp_path, long_chains))
+    said: list[str] = []
+    run(study, until="design", options=Options(backend="serial"), say=said.append)
+    assert said[0].startswith("warning: calibration.chains: the calibration alone may take")
+    assert said[1] == "design: running"

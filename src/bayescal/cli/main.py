@@ -86,16 +86,18 @@ def validate(study: Path) -> None:
 
     STUDY is study.toml or the folder holding it.
     """
-    from bayescal.cli.progress import budget_line, study_summary
+    from bayescal.cli.progress import budget_line, study_summary, time_lines
     from bayescal.config import load_study
     from bayescal.data import load_measured
     from bayescal.pipeline import check_budget
+    from bayescal.pipeline.budget import estimate_time
 
     config = load_study(study)
     measured = load_measured(config)
     needs = check_budget(config, measured)
     click.echo(study_summary(config, measured))
     click.echo(budget_line(needs))
+    click.echo("\n".join(time_lines(estimate_time(config, measured))))
 
 
 def _parse_assignments(values: tuple[str, ...]) -> dict[str, float]:
@@ -233,7 +235,9 @@ def run(
 
     Every stage writes its results into the study's output folder; running
     again reuses stages whose inputs did not change and resumes interrupted
-    simulations. A log is kept in OUTPUT_DIR/bayescal.log.
+    simulations. A log is kept in OUTPUT_DIR/bayescal.log. Progress is drawn as
+    bars on a terminal; redirected to a file (bayescal run STUDY > log 2>&1) it is
+    plain lines: one when a stage starts, one every 10 s or so, one when it ends.
     """
     from bayescal.cli.progress import describe, progress_options
     from bayescal.config import load_study

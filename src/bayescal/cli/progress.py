@@ -5,15 +5,20 @@
 * :func:`describe` -- what ``bayescal run`` and ``bayescal show`` print;
 * :func:`comparison_text` -- the ranking ``bayescal compare`` prints;
 * :func:`screening_text` -- the Morris ranks and proposal of ``bayescal screen``;
-* :func:`progress_options` -- the progress bars of the simulations and the
-  MCMC stages (tqdm), as :class:`bayescal.pipeline.Options` takes them.
+* :func:`progress_options` -- the progress of the simulations and the MCMC
+  stages, as :class:`bayescal.pipeline.Options` takes them: tqdm bars on a
+  terminal, a few plain lines per stage (:class:`LineProgress`) in a log.
 
 The metric columns of every table come from :func:`bayescal.metrics.metric_columns`.
 """
 
 from __future__ import annotations
 
+import contextlib
+import functools
+import sys
 from collections.abc import Callable, Mapping, Sequence
+from time import monotonic
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -26,17 +31,23 @@ if TYPE_CHECKING:
     from bayescal.screening import MorrisIndices, Proposal
 
 __all__ = [
+    "LineProgress",
     "budget_line",
     "comparison_text",
     "describe",
+    "is_terminal",
     "mcmc_bar",
     "metrics_text",
     "progress_options",
     "screening_text",
     "study_summary",
+    "time_lines",
 ]
 
 Tick = Callable[[int], None]
+#: Without a terminal, a stage's progress is a line at its start, one at most every
+#: this many seconds (less often as the stage goes on: LineProgress), one at its end. [s]
+LINE_INTERVAL = 10.0
 #: Under the metrics of ``bayescal show``: what the test window was used for.
 TEST_WINDOW_NOTE = (
     "The test window is read only for these final metrics; parameters, priors and error "
@@ -73,8 +84,8 @@ def study_summary(study: Any, measured: Any) -> str:
         f"  calibrated outputs: {', '.join(study.outputs.calibrate)}",
         f"clock: step {format_duration(step)}, {measured.times[0]} to {measured.times[-1]} UTC, "
         f"{measured.n} samples ({format_duration(measured.n * step)})",
-        f"periods: warm-up {first} samples, {lay.m_star} training periods of {lay.period} "
-        "samples"
+        f"periods: warm-up {first} samples{_leftover(first, lay.warmup, step)}, "
+        f"{lay.m_star} training periods of {lay.period} samples"
         + (f" ({dropped} more dropped: missing data)" if dropped else "")
         + f", test window {lay.test} samples",
     ]
@@ -107,6 +118,21 @@ def study_summary(study: Any, measured: Any) -> str:
     return "\n".join(lines)
 
 
+def _leftover(first: int, warmup: int, step: Any) -> str:
+    """`` (192 of [periods] warmup = 4D + 12 left before the first whole period: ...)``
+    where the first period of the grid starts after the warm-up asked for (the samples
+    between join the warm-up, :mod:`bayescal.periods`); ``""`` where it does not."""
+    from bayescal.data.align import format_duration
+
+    if first == warmup:
+        return ""
+    return (
+        f" ({warmup} of [periods] warmup = {format_duration(warmup * step)} + {first - warmup} "
+        "left before the first whole period: the periods lie on a grid that ends where the "
+        "test window's periods begin)"
+    )
+
+
 def budget_line(needs: Any) -> str:
     """``needs: about 21 MiB of memory, 12 MiB of disk (largest: simulations)``."""
     from bayescal.pipeline.budget import format_bytes
@@ -118,6 +144,23 @@ def budget_line(needs: Any) -> str:
         f"needs: about {format_bytes(memory)} of memory, {format_bytes(disk)} of disk "
         f"(largest: {largest}; limits: [runner] max_memory, max_disk)"
     )
+
+
+def time_lines(times: Any) -> list[str]:
+    """``time: about 30 s ...`` (:func:`bayescal.pipeline.budget.estimate_time`), and a
+    ``warning: ...`` line naming the key to change where it runs over an hour."""
+    from bayescal.pipeline.budget import format_seconds
+
+    parts = ", ".join(f"{part.what} {format_seconds(part.seconds)}" for part in times.parts)
+    runs = times.simulator_runs
+    lines = [
+        f"time: about {format_seconds(times.seconds)} for the emulator and the MCMC ({parts}; "
+        "an order of magnitude from a per-sweep cost model timed on the wall example), "
+        f"plus {runs} simulator run{'s' if runs != 1 else ''} not timed here "
+        "(bayescal simulate runs one)"
+    ]
+    warning = times.warning()
+    return [*lines, f"warning: {warning}"] if warning else lines
 
 
 def _simulator_line(sim: Any) -> str:
@@ -253,12 +296,111 @@ def describe(res: Results) -> str:
     return "\n".join(lines)
 
 
-def mcmc_bar(quiet: bool) -> Callable[[str, int], tuple[Tick, Callable[[], None]]]:
-    """Factory of tqdm bars for MCMC progress: ``(label, total) -> (tick, close)``."""
-    from tqdm.auto import tqdm
+def is_terminal(stream: Any) -> bool:
+    """Whether ``stream`` is a terminal (a closed or odd stream counts as none)."""
+    try:
+        return bool(stream.isatty())
+    except (AttributeError, ValueError, OSError):
+        return False
+
+
+def _duration(seconds: float) -> str:
+    """``42 s``, ``3 min 05 s``, ``2 h 07 min``."""
+    s = round(seconds)
+    if s < 60:
+        return f"{s} s"
+    if s < 3600:
+        return f"{s // 60} min {s % 60:02d} s"
+    return f"{s // 3600} h {s % 3600 // 60:02d} min"
+
+
+class LineProgress:
+    """Progress for a log file: plain lines, no ``\\r`` redraws.
+
+    One line when the stage starts, one when it ends, and between them a line
+    (done, share, elapsed, time left at the rate so far) every ``interval`` seconds
+    for the first ``10 * interval`` seconds, then every tenth of the time elapsed:
+    a stage of ten minutes writes about 30 lines, one of a day about 80.
+    """
+
+    def __init__(
+        self,
+        label: str,
+        total: int,
+        unit: str,
+        stream: Any,
+        interval: float = LINE_INTERVAL,
+        clock: Callable[[], float] | None = None,
+    ) -> None:
+        self.label, self.total, self.unit = label, total, unit
+        self.stream, self.interval = stream, interval
+        self.clock = monotonic if clock is None else clock
+        self.n = self.first = 0
+        self.note = ""
+        self.started = self.last = self.clock()
+        self.closed = False
+        self._write(f"{label}: started, {total} {unit}")
+
+    def _write(self, text: str) -> None:
+        with contextlib.suppress(OSError, ValueError):  # a closed or full stream
+            self.stream.write(text + "\n")
+            self.stream.flush()
+
+    def start_at(self, n: int) -> None:
+        """``n`` done before the first update (runs read from the cache): not in the rate."""
+        self.n = self.first = n
+
+    def update(self, n: int, note: str = "") -> None:
+        """``n`` done so far (the total grows if ``n`` passes it); a line if one is due."""
+        self.n, self.note = n, note
+        self.total = max(self.total, n)
+        now = self.clock()
+        gap = max(self.interval, (now - self.started) / 10)
+        if now - self.last >= gap and not self.closed:
+            self.last = now
+            self._write(self._status(now))
+
+    def _status(self, now: float) -> str:
+        elapsed = now - self.started
+        share = f" ({100 * self.n / self.total:.0f} %)" if self.total else ""
+        text = f"{self.label}: {self.n}/{self.total} {self.unit}{share}, {_duration(elapsed)}"
+        rate = (self.n - self.first) / elapsed if elapsed > 0 else 0.0
+        if rate > 0 and self.n < self.total:
+            text += f", about {_duration((self.total - self.n) / rate)} left"
+        return text + (f", {self.note}" if self.note else "")
+
+    def close(self) -> None:
+        """The last line: how many were done and how long it took."""
+        if self.closed:
+            return
+        self.closed = True
+        elapsed = self.clock() - self.started
+        note = f", {self.note}" if self.note else ""
+        self._write(
+            f"{self.label}: finished {self.n}/{self.total} {self.unit} in {_duration(elapsed)}"
+            + note
+        )
+
+
+def mcmc_bar(
+    quiet: bool, stream: Any = None
+) -> Callable[[str, int], tuple[Tick, Callable[[], None]]]:
+    """Factory of MCMC progress: ``(label, total) -> (tick, close)``.
+
+    A tqdm bar when ``stream`` (standard error by default) is a terminal, plain
+    lines (:class:`LineProgress`) when it is not, nothing when ``quiet``.
+    """
 
     def factory(label: str, total: int) -> tuple[Tick, Callable[[], None]]:
-        bar = tqdm(total=total, desc=label, unit="it", disable=quiet, mininterval=0.5)
+        out = sys.stderr if stream is None else stream
+        if quiet:
+            return (lambda done: None), (lambda: None)
+        if not is_terminal(out):
+            lines = LineProgress(label, total, "it", out)
+            return lines.update, lines.close
+        from tqdm.auto import tqdm
+
+        bar = tqdm(total=total, desc=label, unit="it", mininterval=0.5, file=out)
 
         def tick(done: int) -> None:
             # A phase that extends its chains past the planned total (the difference
@@ -273,13 +415,19 @@ def mcmc_bar(quiet: bool) -> Callable[[str, int], tuple[Tick, Callable[[], None]
     return factory
 
 
-def progress_options(quiet: bool) -> dict[str, Any]:
-    """The progress callbacks of :class:`bayescal.pipeline.Options`: a bar for the
-    simulations (none when ``quiet``) and one per MCMC stage (disabled when ``quiet``)."""
-    return {"progress": None if quiet else simulation_bar, "mcmc_progress": mcmc_bar(quiet)}
+def progress_options(quiet: bool, stream: Any = None) -> dict[str, Any]:
+    """The progress callbacks of :class:`bayescal.pipeline.Options`: one for the
+    simulations and one per MCMC stage (none when ``quiet``); bars on a terminal,
+    plain lines otherwise (``stream``: standard error by default)."""
+    return {
+        "progress": None if quiet else functools.partial(simulation_bar, stream=stream),
+        "mcmc_progress": mcmc_bar(quiet, stream),
+    }
 
 
-def simulation_bar(total: int, desc: str = "simulations") -> tuple[Progress, Callable[[], None]]:
+def simulation_bar(
+    total: int, desc: str = "simulations", stream: Any = None
+) -> tuple[Progress, Callable[[], None]]:
     """A progress callback that draws a tqdm bar (with ETA), and the function that closes it.
 
     Parameters
@@ -288,6 +436,9 @@ def simulation_bar(total: int, desc: str = "simulations") -> tuple[Progress, Cal
         Number of runs in the design.
     desc
         Label of the bar.
+    stream
+        Where it goes (standard error by default): a bar on a terminal, plain
+        lines (:class:`LineProgress`) otherwise.
 
     Returns
     -------
@@ -296,10 +447,22 @@ def simulation_bar(total: int, desc: str = "simulations") -> tuple[Progress, Cal
         ``close()`` afterwards. Runs loaded from the cache on the first call do
         not count towards the rate, so the ETA reflects real runs.
     """
+    out = sys.stderr if stream is None else stream
+    state = {"first": True}
+    if not is_terminal(out):
+        lines = LineProgress(desc, total, "runs", out)
+
+        def progress_lines(done: int, failed: int, total: int) -> None:
+            if state["first"]:
+                lines.start_at(done + failed)
+                state["first"] = False
+            lines.update(done + failed, f"{failed} failed" if failed else "")
+
+        return progress_lines, lines.close
+
     from tqdm.auto import tqdm
 
-    bar = tqdm(total=total, desc=desc, unit="run")
-    state = {"first": True}
+    bar = tqdm(total=total, desc=desc, unit="run", file=out)
 
     def progress(done: int, failed: int, total: int) -> None:
         count = done + failed

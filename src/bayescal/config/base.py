@@ -8,9 +8,11 @@ Every field carries a description (its unit in brackets) and examples
 from __future__ import annotations
 
 import difflib
+import errno
 import numbers
 import os
 import re
+import stat
 import types
 from datetime import date, datetime, timedelta
 from pathlib import Path
@@ -113,6 +115,41 @@ def suggestion(name: str, valid: list[str] | tuple[str, ...]) -> str:
     """``"; did you mean 'x'?"`` for the closest valid name, else the list of valid names."""
     close = difflib.get_close_matches(name, list(valid), n=1)
     return f"; did you mean {close[0]!r}?" if close else f"; expected one of {', '.join(valid)}"
+
+
+def path_problem(path: Path) -> str | None:
+    """Why ``path`` cannot be read as a file, in a few words, or ``None`` if it can.
+
+    ``"file not found"``, ``"not a file"``, ``"symbolic link loop (a.csv -> b.csv ->
+    a.csv)"`` (a link that leads back to itself, here or in a folder on the path; the
+    operating system gives up after a few dozen links), ``"broken symbolic link to
+    'x.csv'"``, or the operating system's reason (permission denied).
+    """
+    try:
+        mode = os.stat(path).st_mode
+    except OSError as exc:
+        if exc.errno == errno.ELOOP:
+            return f"symbolic link loop {_link_chain(path)}"
+        if os.path.islink(path):
+            return f"broken symbolic link to {os.readlink(path)!r}"
+        if exc.errno == errno.ENOENT:
+            return "file not found"
+        return (exc.strerror or str(exc)).lower()
+    return None if stat.S_ISREG(mode) else "not a file"
+
+
+def _link_chain(path: Path, most: int = 6) -> str:
+    """``(a.csv -> b.csv -> a.csv)``: the links from ``path`` until one repeats (or
+    ``in a folder on the path`` where the loop is not in the last name)."""
+    names, seen, here = [path.name], {os.path.abspath(path)}, str(path)
+    while os.path.islink(here) and len(names) <= most:
+        target = os.readlink(here)
+        here = os.path.join(os.path.dirname(here), target)
+        names.append(target)
+        if os.path.abspath(here) in seen:
+            return f"({' -> '.join(names)})"
+        seen.add(os.path.abspath(here))
+    return "in a folder on the path" if len(names) == 1 else f"({' -> '.join([*names, '...'])})"
 
 
 def resolve_path(value: Path, info: ValidationInfo, what: str) -> Path:

@@ -16,6 +16,7 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
+from bayescal.config.base import path_problem
 from bayescal.config.energyplus import (
     EnergyPlusOutput,
     EnergyPlusSection,
@@ -138,9 +139,13 @@ def _energyplus_output(name: str, output: EnergyPlusOutput, study: Study) -> dic
 
 
 def _require_file(path: Path, key: str, what: str) -> None:
-    if not path.is_file():
+    problem = path_problem(path)
+    if problem is not None:
+        where = f"{what} {path.name!r} in {str(path.parent)!r}"
         raise ConfigError(
-            f"{what} {path.name!r} does not exist in {str(path.parent)!r}",
+            f"{what} {path.name!r} does not exist in {str(path.parent)!r}"
+            if problem == "file not found"
+            else f"{where}: {problem}",
             hint="correct the path (relative to the study folder) or copy the file there",
             source=key,
         )

@@ -8,6 +8,7 @@ unit and description.
 
 from __future__ import annotations
 
+from collections.abc import Iterable, Sequence
 from typing import TYPE_CHECKING, Annotated, Literal, Union
 
 from pydantic import Field, model_validator
@@ -17,7 +18,51 @@ from bayescal.config.base import Section, field_doc
 if TYPE_CHECKING:
     from bayescal.design import Prior
 
-__all__ = ["BetaPriorSpec", "Parameter", "PriorSpec", "UniformPriorSpec"]
+__all__ = [
+    "RESERVED_NAMES",
+    "BetaPriorSpec",
+    "Parameter",
+    "PriorSpec",
+    "UniformPriorSpec",
+    "reserved_name_problems",
+]
+
+#: Names the calibration gives its own coordinates and the posterior's variables:
+#: the error model's precisions (``lambda``, ``lambda_star``), AR(1) coefficients
+#: (``phi``), discrepancy variances (``delta_rel``, ``delta_ind``), the noise SD, the
+#: log density and the draws' dimensions. With several calibrated outputs the
+#: per-output ones take the output's name after an underscore (``phi_<output>``).
+RESERVED_NAMES = ("lambda", "lambda_star", "phi", "delta_rel", "delta_ind", "noise_sd", "lp")
+RESERVED_DIMENSIONS = ("chain", "draw")
+PER_OUTPUT = ("lambda_star", "phi", "delta_rel", "delta_ind", "noise_sd")
+
+
+def reserved_name_problems(
+    names: Iterable[str], outputs: Sequence[str], section: str = "parameters"
+) -> list[str]:
+    """``section.<name>: ...`` for each of ``names`` the calibration reserves for itself.
+
+    Parameters
+    ----------
+    names
+        Parameter (or derived quantity) names.
+    outputs
+        The calibrated outputs (their per-output coordinates are reserved too).
+    section
+        Where the names are defined, for the key in the message.
+    """
+    reserved = {*RESERVED_NAMES, *RESERVED_DIMENSIONS}
+    reserved |= {f"{kind}_{output}" for kind in PER_OUTPUT for output in outputs}
+    listed = ", ".join(
+        [*RESERVED_NAMES, *RESERVED_DIMENSIONS, *(f"{kind}_<output>" for kind in PER_OUTPUT)]
+    )
+    what = "parameter" if section == "parameters" else "quantity"
+    return [
+        f"{section}.{name}: the name {name!r} is reserved for the calibration's own "
+        f"coordinates and variables ({listed}); rename the {what} [{section}.{name}]"
+        for name in names
+        if name in reserved
+    ]
 
 
 class UniformPriorSpec(Section):
@@ -50,7 +95,11 @@ PriorSpec = Annotated[
 
 
 class Parameter(Section):
-    """``[parameters.<name>]``: one calibration parameter."""
+    """``[parameters.<name>]``: one calibration parameter. The name is an identifier
+    (letters, digits, _) other than those the calibration reserves for its own
+    coordinates: lambda, lambda_star, phi, delta_rel, delta_ind, noise_sd, lp, chain,
+    draw, and lambda_star, phi, delta_rel, delta_ind or noise_sd followed by _ and
+    a calibrated output's name."""
 
     unit: str = field_doc("Unit of nominal and bounds: the SI unit of the targets.", "W/(m·K)", "1")
     nominal: float = field_doc("Nominal (catalogue) value, inside the bounds.", 0.12)

@@ -40,6 +40,7 @@ from bayescal.config.base import (
     Duration,
     Section,
     field_doc,
+    path_problem,
     raise_problems,
     resolve_path,
 )
@@ -48,7 +49,7 @@ from bayescal.config.data import DataSection
 from bayescal.config.discrepancy import DiscrepancySection
 from bayescal.config.messages import format_errors
 from bayescal.config.outputs import OutputsSection
-from bayescal.config.parameters import DerivedSpec, Parameter
+from bayescal.config.parameters import DerivedSpec, Parameter, reserved_name_problems
 from bayescal.config.screening import ScreeningSection
 from bayescal.config.simulators import SimulatorSection
 from bayescal.config.targets import KIND_UNITS, SENSOR_PREFIX, normal_unit, parse_sensor_target
@@ -133,7 +134,8 @@ def _length(value: object) -> object:
 
 class PeriodsSection(Section):
     """``[periods]``: warm-up, period length and the held-out test window (give one of
-    ``test_samples`` and ``test_fraction``)."""
+    ``test_samples`` and ``test_fraction``). At least two whole training periods must
+    lie between the warm-up and the test window."""
 
     length: Annotated[timedelta | int, BeforeValidator(_length)] = field_doc(
         "Period length: a duration (multiple of data.step) or a number of samples.",
@@ -429,6 +431,8 @@ class Study(Section):
     def _cross_checks(self) -> Study:
         problems = _target_problems(self) + _output_problems(self) + _period_problems(self)
         problems += _derived_problems(self)
+        problems += reserved_name_problems(self.parameters, self.outputs.calibrate)
+        problems += reserved_name_problems(self.derived, self.outputs.calibrate, "derived")
         problems += _sampler_problems(self) + _aggregate_problems(self)
         t = len(self.calibrated)
         if t and self.design.runs < t + 2:
@@ -741,9 +745,11 @@ def load_study(path: str | os.PathLike[str]) -> Study:
     """
     given = Path(path)
     file = given / STUDY_FILE if given.is_dir() else given
-    if not file.is_file():
-        what = f"no {STUDY_FILE} in folder {given}" if given.is_dir() else "file not found"
-        raise ConfigError(what, hint="give the study file or its folder", source=str(file))
+    problem = path_problem(file)
+    if problem is not None:
+        if problem == "file not found" and given.is_dir():
+            problem = f"no {STUDY_FILE} in folder {given}"
+        raise ConfigError(problem, hint="give the study file or its folder", source=str(file))
     try:
         raw = tomllib.loads(_study_text(file.read_bytes()))
     except UnicodeDecodeError as exc:

@@ -282,6 +282,11 @@ def _span(samples: int, step: pd.Timedelta) -> str:
         return f"{samples * step.total_seconds() / 86400 / 365.25:.3g} years"
 
 
+#: Training periods a calibration needs: the emulator's variable conditions are the
+#: boundary conditions' principal components between periods (one period has none).
+MIN_TRAINING_PERIODS = 2
+
+
 def layout_for(
     n_samples: int, step: pd.Timedelta, periods: PeriodsSection, missing: np.ndarray | None = None
 ) -> PeriodLayout:
@@ -301,7 +306,8 @@ def layout_for(
     Raises
     ------
     DataError
-        If the record is shorter than warm-up + one period + test window.
+        If the record is shorter than warm-up + one period + test window, or fewer
+        than :data:`MIN_TRAINING_PERIODS` training periods are left.
     """
     if periods.test_samples is not None:
         test = periods.test_samples
@@ -318,7 +324,20 @@ def layout_for(
             f"{cover} samples",
             hint="use a longer record, or shorten [periods] warmup, length or the test window",
         )
-    return layout_periods(n_samples, length, warmup, test, missing)
+    layout = layout_periods(n_samples, length, warmup, test, missing)
+    if layout.m_star < MIN_TRAINING_PERIODS:
+        key = "test_samples" if periods.test_samples is not None else "test_fraction"
+        dropped = layout.dropped_starts.size
+        more = f" ({dropped} more dropped: missing data)" if dropped else ""
+        raise DataError(
+            f"[periods] leaves {layout.m_star} training period{more} of {length} samples "
+            f"between the warm-up ({warmup} samples) and the test window ({test} samples); "
+            f"the calibration needs at least {MIN_TRAINING_PERIODS} (the emulator's variable "
+            "conditions compare the boundary conditions between periods)",
+            hint=f"shorten [periods] {key}, warmup or length, or use a longer record"
+            + (" (or fill the gaps: data.max_gap_interpolate)" if dropped else ""),
+        )
+    return layout
 
 
 def _where(gap: Gap, raw: pd.DatetimeIndex, labels: RowLabels | None, step: int) -> str:
@@ -404,8 +423,8 @@ def load_measured(study: Study) -> MeasuredData:
     ------
     DataError
         Unreadable file, bad timestamps, data coarser than the step, a record
-        too short for warm-up + one period + test window, or no training period
-        left.
+        too short for warm-up + one period + test window, or fewer than two
+        training periods left.
     """
     record = _record(study, study.data, optional_outputs=False)
     frame, step, source = record.frame, record.step, str(study.data.file)

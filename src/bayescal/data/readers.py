@@ -19,6 +19,7 @@ import numpy as np
 import pandas as pd
 
 from bayescal.clock import parse_time_zone
+from bayescal.config.base import path_problem
 from bayescal.data.align import MAX_LISTED, RowLabels, check_index, localize
 from bayescal.errors import DataError
 from bayescal.simulators.epw_format import EPW_FIELDS
@@ -30,10 +31,12 @@ _DECIMAL_COMMA = re.compile(r"^[+-]?\d+,\d+(?:[eE][+-]?\d+)?$")
 
 
 def _read_text(path: Path) -> str:
-    if not path.is_file():
+    problem = path_problem(path)
+    if problem is not None:
         raise DataError(
-            "file not found" if not path.exists() else "not a file",
-            hint="check data.file in study.toml (relative paths start at the study folder)",
+            problem,
+            hint="check data.file in study.toml (relative paths start at the study folder)"
+            + ("; point it at the file itself" if "link" in problem else ""),
             source=str(path),
         )
     data = path.read_bytes()

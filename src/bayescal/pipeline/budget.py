@@ -1,4 +1,4 @@
-"""Memory and disk a study will need, estimated before anything is allocated.
+"""Memory, disk and time a study will need, estimated before anything is allocated.
 
 Every size a study sets (``[design] runs``, the record's samples and periods,
 ``[emulator] samples`` and basis size, ``[calibration] chains`` x ``samples``,
@@ -23,6 +23,10 @@ The estimates count float64 arrays and the files bayescal writes; they are
 lower bounds of the real peak (Python objects, temporary copies and libraries
 come on top) and are meant to catch sizes that are wrong by orders of
 magnitude, such as ``runs = 1000000000``.
+
+:func:`estimate_time` gives the order of magnitude of the emulator's and the MCMC
+stages' time from a per-sweep cost model (constants timed on the wall example); it
+warns, naming the key, past :data:`LONG_RUN`, and refuses nothing.
 """
 
 from __future__ import annotations
@@ -48,9 +52,13 @@ __all__ = [
     "DISK_VARIABLE",
     "MEMORY_VARIABLE",
     "Need",
+    "TimeEstimate",
+    "TimeNeed",
     "check_budget",
     "estimate",
+    "estimate_time",
     "format_bytes",
+    "format_seconds",
     "machine_memory",
     "screening_need",
 ]
@@ -260,6 +268,132 @@ def estimate(study: Study, measured: MeasuredData) -> list[Need]:
         needs.append(screening_need(s, measured))
     needs.append(Need("report and records", "", "", 0.0, _FIXED_DISK))
     return sorted(needs, key=lambda need: -need.memory)
+
+
+@dataclass(frozen=True)
+class TimeNeed:
+    """How long one MCMC or search stage of a study may take, from its sizes.
+
+    Attributes
+    ----------
+    what
+        The stage (``"calibration"``).
+    key
+        The study key to change where it takes too long (``"calibration.chains"``).
+    detail
+        How the time arises (``"4 chains × 3000 sweeps × 5 coordinates"``).
+    seconds
+        The estimate: an order of magnitude (:func:`estimate_time`). [s]
+    """
+
+    what: str
+    key: str
+    detail: str
+    seconds: float
+
+
+@dataclass(frozen=True)
+class TimeEstimate:
+    """The stages' times (:class:`TimeNeed`) and the simulator runs not estimated."""
+
+    parts: tuple[TimeNeed, ...]
+    simulator_runs: int
+
+    @property
+    def seconds(self) -> float:
+        """The stages' sum. [s]"""
+        return sum(part.seconds for part in self.parts)
+
+    def warning(self) -> str | None:
+        """A line naming the key to change where the stages take over :data:`LONG_RUN`."""
+        if self.seconds <= LONG_RUN:
+            return None
+        worst = max(self.parts, key=lambda part: part.seconds)
+        return (
+            f"{worst.key}: the {worst.what} alone may take about {format_seconds(worst.seconds)} "
+            f"({worst.detail}); lower {worst.key} unless that is meant"
+        )
+
+
+#: A study whose MCMC and searches take longer than this is warned about. [s]
+LONG_RUN = 3600.0
+#: The cost model of :func:`estimate_time`, from the wall example (30 runs, 24 periods,
+#: 5 basis vectors) timed on a two-core development machine: seconds per coordinate
+#: move of a Metropolis-within-Gibbs sweep (emulator hyperparameters, calibration)
+#: beyond the linear algebra, the algebra's seconds per flop-like unit, and the gradient
+#: search of one basis vector's hyperparameters (training = 'map') at the wall's sizes.
+_EMULATOR_MOVE = 3e-4
+_CALIBRATION_MOVE = 2.5e-4
+_ALGEBRA = 2e-9
+_MAP_PER_BASIS = 2.5
+_WALL = 30.0**2 + 30.0 * 24.0 + 24.0**2
+#: Basis vectors assumed where pca_variance chooses them (the wall example has 5).
+_BASIS_GUESS = 5
+
+
+def format_seconds(seconds: float) -> str:
+    """``40 s``, ``12 min``, ``3.5 h``, ``12 days``."""
+    if seconds < 90:
+        return f"{seconds:.0f} s"
+    if seconds < 5400:
+        return f"{seconds / 60:.0f} min"
+    if seconds < 2 * 86400:
+        return f"{seconds / 3600:.2g} h"
+    return f"{seconds / 86400:.3g} days"
+
+
+def estimate_time(study: Study, measured: MeasuredData) -> TimeEstimate:
+    """How long the emulator, the calibration and the difference process may take.
+
+    An order of magnitude, not a forecast: each Metropolis-within-Gibbs sweep costs
+    its coordinates times a constant and the linear algebra of the study's sizes
+    (``runs³ + periods³`` per emulator move, ``basis × (runs² + runs × periods)``
+    per calibration move), the gradient search of the emulator (``training =
+    'map'``) a constant per basis vector scaled by ``runs² + runs × periods +
+    periods²``; the constants were timed on the wall example. Chains extended
+    towards ``max_samples`` take longer; NUTS is costed like Metropolis sweeps. The
+    simulator's runs are not timed here (their count is returned): ``bayescal
+    simulate`` runs one.
+    """
+    s = study
+    t, runs, q = len(s.calibrated), int(s.design.runs), len(s.outputs.calibrate)
+    lay = measured.layout
+    m = int(lay.m_star)
+    em, cal = s.emulator, s.calibration
+    rows = q * int(lay.period)
+    basis = max(1, min(em.pca_components or _BASIS_GUESS, rows, runs * m))
+    guess = "" if em.pca_components else " (assumed; pca_variance chooses)"
+    r = len(s.boundary_conditions) * (em.history_periods + 1) * _X_PER_SERIES
+    parts = []
+    if em.training == "mcmc":
+        hyper = basis * (t + r + 1) + 1
+        sweeps = 2 * (em.burn + em.samples)
+        move = _EMULATOR_MOVE + _ALGEBRA * (float(runs) ** 3 + float(m) ** 3)
+        key = _out_of_proportion((em, "burn", "emulator.burn"), (em, "samples", "emulator.samples"))
+        detail = f"2 chains × {sweeps // 2} sweeps × {hyper} hyperparameters{guess}"
+        parts.append(TimeNeed("emulator", key, detail, sweeps * hyper * move))
+    else:
+        size = (float(runs) ** 2 + float(runs) * m + float(m) ** 2) / _WALL
+        detail = f"a gradient search per basis vector, {basis}{guess}, {runs} runs × {m} periods"
+        parts.append(TimeNeed("emulator", "design.runs", detail, _MAP_PER_BASIS * basis * size))
+    errors = s.outputs.errors
+    d = t + 1 + q + sum(1 for n in s.outputs.calibrate if n in errors and errors[n].model == "ar1")
+    move = _CALIBRATION_MOVE + _ALGEBRA * basis * (float(runs) ** 2 + float(runs) * m)
+    sweeps = cal.burn + cal.samples
+    key = _out_of_proportion(
+        (cal, "chains", "calibration.chains"),
+        (cal, "burn", "calibration.burn"),
+        (cal, "samples", "calibration.samples"),
+    )
+    detail = f"{cal.chains} chains × {sweeps} sweeps × {d} coordinates"
+    parts.append(TimeNeed("calibration", key, detail, cal.chains * sweeps * d * move))
+    if s.discrepancy.enabled:
+        burn, samples, _ = s.discrepancy_lengths()
+        detail = f"{cal.chains} chains × {burn + samples} sweeps × {d} coordinates"
+        seconds = cal.chains * (burn + samples) * d * move
+        parts.append(TimeNeed("difference process", key, detail, seconds))
+    simulator = runs + (s.predict.runs if s.predict.method == "simulator" else 0)
+    return TimeEstimate(tuple(parts), simulator)
 
 
 def machine_memory() -> int | None:

@@ -26,7 +26,7 @@ if TYPE_CHECKING:
     from bayescal.config import Study
     from bayescal.pipeline.stages import Context
 
-__all__ = ["derived_seed", "digest", "stage_keys"]
+__all__ = ["derived_seed", "digest", "keys_and_inputs", "stage_inputs", "stage_keys"]
 
 
 def _plain(obj: Any) -> Any:
@@ -74,53 +74,115 @@ def _likelihood_discrepancy(study: Study) -> bool:
     return any(errors[n].discrepancy for n in study.outputs.calibrate if n in errors)
 
 
+#: One input of a stage key: its name, its value, and whether a table's entries are
+#: named one by one in :func:`stage_inputs` (``parameters.cp_fb``, ``design.runs``).
+Item = tuple[str, Any, bool]
+
+
+def _keyed(stage: str, items: list[Item]) -> tuple[str, dict[str, str]]:
+    """The key of ``stage`` (the digest of the items' values in order, exactly as the
+    keys were always computed) and a short digest of each named input."""
+    key = digest(stage, *(value for _, value, _ in items))
+    inputs: dict[str, str] = {}
+    for name, value, by_entry in items:
+        if by_entry and isinstance(value, dict):
+            inputs |= {f"{name}.{k}": digest(v)[:16] for k, v in value.items()}
+            inputs.setdefault(name, digest(sorted(value))[:16])  # entries added or removed
+        else:
+            inputs[name] = digest(value)[:16]
+    return key, inputs
+
+
 def stage_keys(ctx: Context) -> dict[str, str]:
     """The key of every stage for the study as it is now."""
+    return keys_and_inputs(ctx)[0]
+
+
+def stage_inputs(ctx: Context) -> dict[str, dict[str, str]]:
+    """Every stage's inputs, each by name with a short digest of its value: what
+    ``stages.json`` records beside the key, so that a stage run again can say which
+    input changed (``parameters.cp_fb``, ``emulator.pca_variance``, ``the design stage``)."""
+    return keys_and_inputs(ctx)[1]
+
+
+def keys_and_inputs(ctx: Context) -> tuple[dict[str, str], dict[str, dict[str, str]]]:
+    """:func:`stage_keys` and :func:`stage_inputs` together (the inputs hashed once)."""
     s = ctx.study
     dump = s.model_dump(mode="json")
     keys: dict[str, str] = {}
-    keys["design"] = digest("design", dump["parameters"], dump["design"], s.study.seed)
-    keys["simulate"] = digest(
-        "simulate",
-        keys["design"],
-        simulator_fingerprint(ctx.simulator),
-        forcing_fingerprint(ctx.measured.forcing),
-        dump["runner"]["retries"],
-        dump["runner"]["timeout"],
+    inputs: dict[str, dict[str, str]] = {}
+
+    def stage(name: str, *items: Item) -> None:
+        keys[name], inputs[name] = _keyed(name, list(items))
+
+    stage(
+        "design",
+        ("parameters", dump["parameters"], True),
+        ("design", dump["design"], True),
+        ("study.seed", s.study.seed, False),
     )
-    keys["emulator"] = digest(
+    stage(
+        "simulate",
+        ("the design stage", keys["design"], False),
+        ("simulator", simulator_fingerprint(ctx.simulator), False),
+        ("boundary conditions", forcing_fingerprint(ctx.measured.forcing), False),
+        ("runner.retries", dump["runner"]["retries"], False),
+        ("runner.timeout", dump["runner"]["timeout"], False),
+    )
+    stage(
         "emulator",
-        keys["simulate"],
-        _measured_key(ctx),
-        s.outputs.calibration_dump(),
-        dump["emulator"],
+        ("the simulate stage", keys["simulate"], False),
+        ("measured data and periods", _measured_key(ctx), False),
+        ("outputs", s.outputs.calibration_dump(), True),
+        ("emulator", dump["emulator"], True),
     )
     calibration = dict(dump["calibration"])
     if calibration.get("moves") == "gibbs":  # the default: the keys it had before the setting
         del calibration["moves"]
     elif calibration.get("moves") == "joint":  # screened joint moves draw other chains
         calibration["moves"] = "joint, screened"
-    keys["calibrate"] = digest(
+    stage(
         "calibrate",
-        keys["emulator"],
-        calibration,
-        *([dump["derived"]] if s.derived else []),
+        ("the emulator stage", keys["emulator"], False),
+        ("calibration", calibration, True),
+        *([("derived", dump["derived"], True)] if s.derived else []),
         # the discrepancy's variance prior reaches down to 1e-8 (it stopped at 1e-4)
-        *([f"discrepancy from {DELTA_RANGE[0]:g}"] if _likelihood_discrepancy(s) else []),
+        *(
+            [("discrepancy prior range", f"discrepancy from {DELTA_RANGE[0]:g}", False)]
+            if _likelihood_discrepancy(s)
+            else []
+        ),
     )
-    keys["discrepancy"] = digest("discrepancy", keys["calibrate"], dump["discrepancy"])
-    keys["predict"] = digest(
+    stage(
+        "discrepancy",
+        ("the calibrate stage", keys["calibrate"], False),
+        ("discrepancy", dump["discrepancy"], True),
+    )
+    stage(
         "predict",
-        keys["discrepancy"],
-        dump["predict"],
-        {n: p.nominal for n, p in s.parameters.items()},
-        *([_held_out_key(ctx)] if s.outputs.held_out else []),
+        ("the discrepancy stage", keys["discrepancy"], False),
+        ("predict", dump["predict"], True),
+        ("nominal values", {n: p.nominal for n, p in s.parameters.items()}, False),
+        *([("held-out sensors", _held_out_key(ctx), False)] if s.outputs.held_out else []),
         # an in-likelihood discrepancy is conditioned on the training residuals (it added
         # its prior variance before): the predictions of such a study are computed anew
-        *(["discrepancy conditioned"] if _likelihood_discrepancy(s) else []),
+        *(
+            [("discrepancy conditioning", "discrepancy conditioned", False)]
+            if _likelihood_discrepancy(s)
+            else []
+        ),
         # the emulator route conditions on the test window's runs and no longer adds
         # 1/lambda to the noise: its predictions are computed anew
-        *(["emulator on the test window's runs"] if s.predict.method == "emulator" else []),
+        *(
+            [("emulator route", "emulator on the test window's runs", False)]
+            if s.predict.method == "emulator"
+            else []
+        ),
     )
-    keys["report"] = digest("report", keys["predict"], s.study.name, s.study.description)
-    return keys
+    stage(
+        "report",
+        ("the predict stage", keys["predict"], False),
+        ("study.name", s.study.name, False),
+        ("study.description", s.study.description, False),
+    )
+    return keys, inputs

@@ -36,8 +36,8 @@ from bayescal.config import Study
 from bayescal.design import Design
 from bayescal.discrepancy import Discrepancy
 from bayescal.errors import BayescalError, ConfigError, DataError
-from bayescal.pipeline.budget import check_budget
-from bayescal.pipeline.keys import stage_keys
+from bayescal.pipeline.budget import check_budget, estimate_time
+from bayescal.pipeline.keys import keys_and_inputs
 from bayescal.pipeline.stages import (
     Context,
     EmulatorResult,
@@ -169,11 +169,12 @@ class _Runner:
         self.out = ctx.out
         self.log = StageLog.open(self.out)
         self.logger = file_logger(self.out)
-        self.keys = stage_keys(ctx)
+        self.keys, self.inputs = keys_and_inputs(ctx)
         self.say = say
         self.reused: list[str] = []
         self.ran: list[str] = []
         self.stale = False
+        self.force_from = force_from
         if force_from is not None:
             self.log.forget_from(force_from)
 
@@ -207,9 +208,30 @@ class _Runner:
             self.reused.append(stage)
             self._note(f"{stage}: up to date, reused{self._when(stage)}")
         else:
+            why = self._why(stage)
             self.stale = True
-            self._note(f"{stage}: running")
+            self._note(f"{stage}: running" + (f" ({why})" if why else ""))
         return ok, value
+
+    def _why(self, stage: str) -> str:
+        """Why ``stage`` runs again (``""`` on its first run, or where a warning said it)."""
+        if self.force_from is not None and STAGES.index(stage) >= STAGES.index(self.force_from):
+            return f"--from {self.force_from}"
+        changed = self.log.changed_inputs(stage, self.keys[stage], self.inputs[stage])
+        if changed is None:
+            return (
+                "its inputs changed; the record of its last run, from an earlier bayescal, "
+                "does not say which"
+            )
+        if changed:
+            return f"inputs changed: {', '.join(changed)}"
+        if stage not in self.log.records:
+            return ""
+        if self.stale and self.ran:
+            return f"after {self.ran[-1]} ran again"
+        if not self.log.finished(stage):
+            return "some of its files are missing"
+        return ""
 
     def _warn(self, text: str) -> None:
         self.logger.warning(text)
@@ -245,7 +267,7 @@ class _Runner:
 
     def finish(self, stage: str, files: list[str], start: float) -> None:
         seconds = time.perf_counter() - start
-        self.log.finish(stage, self.keys[stage], files, seconds)
+        self.log.finish(stage, self.keys[stage], files, seconds, self.inputs[stage])
         shutil.rmtree(self.checkpoints(stage), ignore_errors=True)
         self.ran.append(stage)
         self._note(f"{stage}: done in {seconds:.1f} s")
@@ -545,6 +567,9 @@ def run(
         made = prior_from_draws(study)
         if made is not None:
             tell(made.describe())
+    long_run = estimate_time(study, ctx.measured).warning()
+    if long_run is not None:
+        tell(f"warning: {long_run}")
     with writing(ctx.out, sum(need.disk for need in needs)):
         ctx.out.mkdir(parents=True, exist_ok=True)
         with OutputLock(ctx.out, command="run") as lock:

@@ -1,8 +1,9 @@
 """The stage record of a study's output folder: ``stages.json``.
 
-When a stage finishes, its key (:mod:`bayescal.pipeline.keys`), the files it
-wrote with their size and SHA-256, how long it ran and when it finished are
-recorded in ``stages.json`` (written atomically after the stage's own files).
+When a stage finishes, its key (:mod:`bayescal.pipeline.keys`) with a digest of
+each input of the key, the files it wrote with their size and SHA-256, how long
+it ran and when it finished are recorded in ``stages.json`` (written atomically
+after the stage's own files); a stage run again names the inputs that changed.
 A later run reuses a stage when its recorded key equals the key it would
 compute now and all its files exist; otherwise it runs the stage again, and
 with it every stage after it. A file whose size or checksum is no longer the
@@ -17,7 +18,7 @@ from __future__ import annotations
 import hashlib
 import os
 import time
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from datetime import datetime
 from pathlib import Path
@@ -118,14 +119,37 @@ class StageLog:
                 bad.append(name)
         return bad
 
-    def finish(self, stage: str, key: str, files: Iterable[str], seconds: float) -> None:
+    def changed_inputs(self, stage: str, key: str, inputs: Mapping[str, str]) -> list[str] | None:
+        """The names of the inputs of ``stage`` whose digest differs from the recorded
+        one (:func:`bayescal.pipeline.keys.stage_inputs`), in the order of ``inputs``
+        then the recorded ones no longer there; ``[]`` where the recorded key is ``key``
+        or the stage is not recorded, ``None`` where the record keeps no inputs (written
+        by an earlier bayescal)."""
+        rec = self.records.get(stage) or {}
+        if not rec or rec.get("key") == key:
+            return []
+        old = rec.get("inputs")
+        if not isinstance(old, dict):
+            return None
+        changed = [name for name, value in inputs.items() if old.get(name) != value]
+        return changed + [name for name in old if name not in inputs]
+
+    def finish(
+        self,
+        stage: str,
+        key: str,
+        files: Iterable[str],
+        seconds: float,
+        inputs: Mapping[str, str] | None = None,
+    ) -> None:
         """Record ``stage`` as finished (after its files are written), with the size and
-        SHA-256 of each of its files."""
+        SHA-256 of each of its files and the digests of the inputs of its key."""
         names = sorted(files)
         paths = {name: self.folder / name for name in names}
         present = {name: path for name, path in paths.items() if path.is_file()}
         self.records[stage] = {
             "key": key,
+            **({"inputs": dict(inputs)} if inputs is not None else {}),
             "files": names,
             "sizes": {name: path.stat().st_size for name, path in present.items()},
             "sha256": {name: file_sha256(path) for name, path in present.items()},
