@@ -171,7 +171,7 @@ def conditions_outside(assembled: Assembled, x_new: np.ndarray) -> tuple[str, ..
 
 def posterior_draws(
     posterior: Posterior, n: int, fixed: Mapping[str, float]
-) -> tuple[np.ndarray, ...]:
+) -> tuple[np.ndarray, np.ndarray]:
     """``n`` draws thinned evenly: theta* ``(S, t)`` with ``fixed`` set, and their indices."""
     names = list(posterior.names)
     theta = posterior.draws.reshape(-1, len(names))
@@ -502,19 +502,20 @@ def predict_as(
             f"calibration's {', '.join(names)}"
         )
     fixed = dict(fixed or {})
+    unknown = sorted(set(fixed) - set(wanted))
+    if unknown:
+        raise ConfigError(
+            f"--set {unknown[0]}: not a calibrated parameter of {Path(other.path or '').name}",
+            hint=f"its parameters: {', '.join(wanted)}",
+        )
     nominal = nominal_parameters(other)
-    flat = posterior.draws.reshape(-1, len(names))
-    pick = np.unique(
-        np.linspace(0, flat.shape[0] - 1, min(ctx.study.predict.runs, flat.shape[0])).astype(int)
-    )
-    columns = []
-    for n in wanted:
-        if n in fixed:
-            columns.append(np.full(pick.size, fixed[n]))
-        elif n in names:
-            columns.append(flat[pick, names.index(n)])
-        else:
-            columns.append(np.full(pick.size, nominal[n]))
+    draws, _ = posterior_draws(posterior, ctx.study.predict.runs, {})
+    columns = [
+        np.full(draws.shape[0], fixed[n] if n in fixed else nominal[n])
+        if n in fixed or n not in names
+        else draws[:, names.index(n)]
+        for n in wanted
+    ]
     theta = np.column_stack(columns)
     layout = ctx.measured.layout
     anchor = ctx.measured.times[int(layout.train_starts[0])]
@@ -532,7 +533,7 @@ def predict_as(
         + f"; the bands hold the stated accuracy of {', '.join(outputs)}, no model error"
     ]
     name = Path(other.path or "").name
-    tell(f"predict as {name}: {pick.size} posterior draws on {record.source.name}")
+    tell(f"predict as {name}: {theta.shape[0]} posterior draws on {record.source.name}")
     runs, _ = runs_at(other_ctx, theta)
     measured = {**record.outputs, **record.held_out}
     band = held_out_band(
