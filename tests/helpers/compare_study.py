@@ -107,15 +107,36 @@ max_samples = 200
 """
 
 
-def wall_data(seed: int = 3, days: int = DAYS, phi: float = PHI) -> pd.DataFrame:
-    """Surface temperatures and the inside heat flux with AR(1) noise, half-hourly."""
-    truth = {"k_cb": 0.124, "cp_cb": 845.41, "cp_fb": 840.0}  # the boards as the study has them
+#: The truth of :func:`wall_data` (the boards' specific heat as the study has them).
+TRUTH = {"k_cb": 0.124, "cp_cb": 845.41, "cp_fb": 840.0}
+
+
+def wall_data(
+    seed: int = 3,
+    days: int = DAYS,
+    phi: float = PHI,
+    truth: dict[str, float] | None = None,
+    test_days: int = 1,
+) -> pd.DataFrame:
+    """Surface temperatures and the inside heat flux with AR(1) noise, half-hourly.
+
+    One day of warm-up, ``days`` training days and ``test_days`` test days; the
+    flux is the wall's at ``truth`` (default :data:`TRUTH`; a truth without
+    ``cp_fb`` keeps the study's boards, 840 J/(kg·K)).
+    """
+    truth = {**TRUTH, **(truth or {})}
     ve = virtual_experiment(
-        seed=seed, truth=truth, runs=5, periods=days, warmup_days=1, test_days=1, noise_phi=phi
+        seed=seed,
+        truth=truth,
+        runs=5,
+        periods=days,
+        warmup_days=1,
+        test_days=test_days,
+        noise_phi=phi,
     )
     n = ve.layout.n_total
     times = pd.date_range("2012-02-01", periods=n, freq="30min")
-    assert n == PER_DAY * (days + 2)
+    assert n == PER_DAY * (days + 1 + test_days)
     return pd.DataFrame(
         {
             "time": times.strftime("%Y-%m-%dT%H:%M:%S"),
