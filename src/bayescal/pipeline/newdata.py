@@ -50,6 +50,7 @@ from bayescal.data.measured import MeasuredData, load_new_record
 from bayescal.design import Design
 from bayescal.emulator.assemble import Assembled, with_history
 from bayescal.errors import ConfigError, SimulatorError
+from bayescal.metrics import band_notes, honest_range
 from bayescal.pipeline.predict import (
     Band,
     conditioned_discrepancy,
@@ -70,6 +71,7 @@ from bayescal.pipeline.stages import (
     nominal_run,
     simulate,
 )
+from bayescal.report.trust import ABSORBS, NO_BETTER
 
 if TYPE_CHECKING:
     from bayescal.calibration.posterior import Posterior
@@ -585,6 +587,8 @@ def summary_lines(pred: NewPrediction) -> list[str]:
         + (" + the emulator's own variance" if pred.method == "emulator" else ""),
     ]
     lines += [f"  note: {n}" for n in pred.notes]
+    warnings: list[str] = []
+    rows_out: list[str] = []
     for output in dict.fromkeys(m["output"]) if len(m) else ():
         rows = m[m["output"] == output].set_index("model")
         if "calibrated" not in rows.index:
@@ -594,21 +598,35 @@ def summary_lines(pred: NewPrediction) -> list[str]:
         if "nominal" in rows.index:
             nom = float(rows.loc["nominal", "rmse"])
             change = float(cal["rmse"]) / nom - 1.0 if nom > 0 else float("nan")
-            verdict = "better than" if change < -0.05 else "worse than" if change > 0.05 else "as"
+            verdict = (
+                "better than"
+                if change < -NO_BETTER
+                else "worse than"
+                if change > NO_BETTER
+                else "as good as"
+            )
             line += f" against {nom:.4g} at the nominal values ({100 * change:+.0f} %, {verdict}"
-            line += " the catalogue)" if verdict != "as" else " good as the catalogue)"
+            line += " the catalogue)"
+            if verdict == "worse than":
+                warnings.append(
+                    f"WARNING: {output} is predicted {100 * change:.0f} % worse than with the "
+                    f"catalogue values: {ABSORBS}"
+                )
         cover95, cover50 = float(cal["coverage95"]), float(cal["coverage50"])
         line += f"; bands cover {cover95:.3f} / {cover50:.3f}"
         if "n_eff95" in cal and np.isfinite(float(cal["n_eff95"])):
-            from bayescal.metrics import honest_range
-
             low, high = honest_range(level, float(cal["n_eff95"]))
             holds = "within" if low <= cover95 <= high else "OUTSIDE"
             line += f" ({100 * level:g} % band {holds} {low:.2f}-{high:.2f}, what an honest band"
             line += f" covers on about {float(cal['n_eff95']):.0f} independent samples)"
-        lines.append(line)
-    from bayescal.metrics import band_notes
-
+            if holds == "OUTSIDE":
+                side = "too narrow" if cover95 < low else "too wide"
+                warnings.append(
+                    f"WARNING: the {100 * level:g} % band of {output} covers {cover95:.3f}, "
+                    f"outside {low:.2f}-{high:.2f}: {side} for these errors"
+                )
+        rows_out.append(line)
+    lines += warnings + rows_out
     lines += [f"  note: {n}" for n in band_notes(m, level=level)]
     return lines
 
