@@ -364,6 +364,12 @@ def predict_new(
             "the new conditions lie outside the emulator's training range "
             f"({'; '.join(outside[:3])}): the simulator is re-run at the posterior draws"
         )
+    elif outside:
+        notes.append(
+            "the new conditions lie outside the training periods' range "
+            f"({'; '.join(outside[:3])}{' ...' if len(outside) > 3 else ''}): the simulator "
+            "carries the physics there, and an in-likelihood discrepancy reverts toward its prior"
+        )
     if chosen == "emulator" and fixed:
         raise ConfigError(
             "--set fixes parameters in the simulator's runs only",
