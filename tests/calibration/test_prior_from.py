@@ -18,7 +18,6 @@ import numpy as np
 import pytest
 from scipy import integrate, special, stats
 
-from bayescal.calibration.kron import KronCalibrationDensity
 from bayescal.calibration.priors import ThetaPriors
 from bayescal.calibration.target import CalibrationPosterior
 from bayescal.design import (
@@ -28,8 +27,8 @@ from bayescal.design import (
     fit_logit_normal,
     prior_from_spec,
 )
-from bayescal.emulator.kernel import SeparableKernel
 from bayescal.errors import ConfigError
+from random_density import random_density
 
 MEAN = (0.3, -0.8)
 COV = ((0.5, 0.3), (0.3, 0.4))
@@ -67,20 +66,6 @@ def test_the_fit_recovers_a_known_density_from_its_draws() -> None:
         fit_logit_normal(("a",), np.array([[0.2], [1.0]]))
 
 
-def _density(seed: int = 0) -> KronCalibrationDensity:
-    rng = np.random.default_rng(seed)
-    t, s, p, runs, periods = 3, 2, 2, 12, 8
-    kernels = [
-        SeparableKernel(rng.uniform(0.3, 0.9, t + s), float(rng.uniform(0.5, 2.0)), t)
-        for _ in range(p)
-    ]
-    w = rng.standard_normal((runs * periods, p))
-    w_star = rng.standard_normal((periods, p))
-    return KronCalibrationDensity(
-        rng.random((runs, t)), rng.random((periods, s)), kernels, [2.0, 0.5], w, w_star
-    )
-
-
 def _posterior() -> CalibrationPosterior:
     # the joint over parameters 2 and 0 (in that order), parameter 1 uniform
     priors = [
@@ -88,7 +73,7 @@ def _posterior() -> CalibrationPosterior:
         UniformPrior(0.0, 2.0),
         PosteriorPrior(-1.0, 1.0, joint=JOINT, index=0),
     ]
-    return CalibrationPosterior(_density(), priors, (5.0, 5.0), (3.0, 1.5))
+    return CalibrationPosterior(random_density(), priors, (5.0, 5.0), (3.0, 1.5))
 
 
 def test_the_target_adds_the_joint_density_in_every_form() -> None:

@@ -26,12 +26,12 @@ from scipy import stats
 from bayescal.calibration.kron import KronCalibrationDensity
 from bayescal.calibration.target import BatchedPosterior, CalibrationPosterior
 from bayescal.design import BetaPrior, UniformPrior
-from bayescal.emulator.kernel import SeparableKernel
 from bayescal.errors import ConfigError
 from bayescal.mcmc import MetropolisWithinGibbs, run_chains
 from bayescal.mcmc.diagnostics import import_arviz
 from bayescal.mcmc.samplers import AdaptiveMetropolis
 from bayescal.mcmc.samplers.lockstep import as_lockstep, run_lockstep
+from random_density import random_density
 
 N_SE = 4.0  # tolerance in Monte Carlo standard errors (see module docstring)
 # Batch and loop make the same BLAS calls per point; only the order of the final
@@ -42,17 +42,7 @@ REL = 1e-12
 
 def _density(seed: int = 0, runs: int = 12, periods: int = 8) -> KronCalibrationDensity:
     """A calibration density on random data: t = 3, s = 2, p = 2 bases."""
-    rng = np.random.default_rng(seed)
-    t, s, p = 3, 2, 2
-    kernels = [
-        SeparableKernel(rng.uniform(0.3, 0.9, t + s), float(rng.uniform(0.5, 2.0)), t)
-        for _ in range(p)
-    ]
-    w = rng.standard_normal((runs * periods, p))
-    w_star = rng.standard_normal((periods, p))
-    return KronCalibrationDensity(
-        rng.random((runs, t)), rng.random((periods, s)), kernels, [2.0, 0.5], w, w_star
-    )
+    return random_density(seed, runs, periods)
 
 
 def _scale(
