@@ -149,6 +149,60 @@ def test_no_import_circle_between_rooms() -> None:
             assert circle is None, " -> ".join(circle)
 
 
+def _module_graph() -> dict[str, set[str]]:
+    """Module -> the ``bayescal`` modules it imports (type-only and in-function imports too;
+    ``from package import module`` counts as the module, ``from module import name`` as
+    the module)."""
+    modules = _modules()
+    graph: dict[str, set[str]] = defaultdict(set)
+    for module, path in modules.items():
+        for target, names, _ in _imports(path):
+            for full in [f"{target}.{n}" for n in names] or [target]:
+                found = full if full in modules else target
+                while found not in modules and "." in found:
+                    found = found.rsplit(".", 1)[0]
+                if found != module:
+                    graph[module].add(found)
+    return graph
+
+
+def test_no_import_circle_between_modules() -> None:
+    # within a room too, and through imports under TYPE_CHECKING (issue 37: type-only
+    # circles are circles all the same)
+    graph = _module_graph()
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    on_stack: set[str] = set()
+    circles: list[list[str]] = []
+
+    def strong(v: str) -> None:  # Tarjan's strongly connected components
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        on_stack.add(v)
+        for w in sorted(graph[v]):
+            if w not in index:
+                strong(w)
+                low[v] = min(low[v], low[w])
+            elif w in on_stack:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            component = []
+            while True:
+                w = stack.pop()
+                on_stack.discard(w)
+                component.append(w)
+                if w == v:
+                    break
+            if len(component) > 1:
+                circles.append(sorted(component))
+
+    for module in sorted(_modules()):
+        if module not in index:
+            strong(module)
+    assert not circles, "import circles: " + "; ".join(" <-> ".join(c) for c in circles)
+
+
 @pytest.mark.parametrize("module", sorted(_modules()))
 def test_module_is_small_and_imports_no_private_name(module: str) -> None:
     path = _modules()[module]

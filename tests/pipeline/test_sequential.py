@@ -23,7 +23,8 @@ from bayescal.config import load_study
 from bayescal.design import PosteriorPrior
 from bayescal.errors import BayescalError, ConfigError
 from bayescal.pipeline import Options, load_results, run
-from bayescal.pipeline.sequential import HISTORY_FILE, prior_from_draws, update, update_files
+from bayescal.pipeline.sequential import prior_from_draws
+from bayescal.pipeline.update import HISTORY_FILE, update, update_files
 from compare_study import STUDY
 from virtual_wall import virtual_experiment
 

@@ -32,7 +32,7 @@ from bayescal.errors import ConfigError
 from bayescal.mcmc.nuts import NutsChains, require_jax, run_isolated, run_nuts
 
 if TYPE_CHECKING:
-    from bayescal.calibration.posterior import CalibrationPosterior
+    from bayescal.calibration.target import CalibrationPosterior
 
 __all__ = [
     "NutsResult",

@@ -501,7 +501,7 @@ def update(
     from bayescal.config import load_study
     from bayescal.errors import ConfigError
     from bayescal.pipeline import Options
-    from bayescal.pipeline.sequential import update as run_update
+    from bayescal.pipeline.update import update as run_update
 
     config = load_study(study)
     stop = None

@@ -14,8 +14,9 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import json
+from collections.abc import Mapping
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
@@ -24,7 +25,26 @@ from bayescal.runner import forcing_fingerprint, simulator_fingerprint
 
 if TYPE_CHECKING:
     from bayescal.config import Study
-    from bayescal.pipeline.stages import Context
+    from bayescal.data.measured import MeasuredData
+    from bayescal.design import Prior
+    from bayescal.simulators.base import Simulator
+
+
+class Context(Protocol):
+    """What the keys read of a loaded study (:class:`bayescal.pipeline.stages.Context`)."""
+
+    @property
+    def study(self) -> Study: ...
+
+    @property
+    def simulator(self) -> Simulator: ...
+
+    @property
+    def measured(self) -> MeasuredData: ...
+
+    @property
+    def priors(self) -> Mapping[str, Prior]: ...
+
 
 __all__ = ["derived_seed", "digest", "keys_and_inputs", "stage_inputs", "stage_keys"]
 
@@ -115,12 +135,15 @@ def keys_and_inputs(ctx: Context) -> tuple[dict[str, str], dict[str, dict[str, s
     def stage(name: str, *items: Item) -> None:
         keys[name], inputs[name] = _keyed(name, list(items))
 
-    stage(
-        "design",
+    design: list[Item] = [
         ("parameters", dump["parameters"], True),
         ("design", dump["design"], True),
         ("study.seed", s.study.seed, False),
-    )
+    ]
+    if s.study.prior_from is not None:  # the previous posterior's density, not only its path
+        specs = {n: p.spec() for n, p in ctx.priors.items()}
+        design.append(("study.prior_from (the previous posterior)", specs, False))
+    stage("design", *design)
     stage(
         "simulate",
         ("the design stage", keys["design"], False),

@@ -1,4 +1,4 @@
-"""A posterior as the next prior: ``[study] prior_from`` and ``bayescal update``.
+"""A posterior as the next prior: ``[study] prior_from`` (``bayescal update`` chains it).
 
 ``[study] prior_from = "../other"`` reads the finished calibration of another
 study and makes its posterior the prior of the parameters the two studies
@@ -17,15 +17,11 @@ one Gaussian in logit space does not follow).
 from __future__ import annotations
 
 import functools
-import tomllib
-from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-import pandas as pd
-import tomli_w
 from scipy import special, stats
 
 from bayescal.config import Study, load_study
@@ -34,16 +30,7 @@ from bayescal.errors import BayescalError, ConfigError
 from bayescal.store import posterior as posterior_store
 from bayescal.store.stages import StageLog
 
-__all__ = [
-    "FIT_WARN",
-    "HISTORY_FILE",
-    "PriorFromDraws",
-    "Update",
-    "prior_from_draws",
-    "study_priors",
-    "update",
-    "update_files",
-]
+__all__ = ["FIT_WARN", "PriorFromDraws", "prior_from_draws", "study_priors"]
 
 #: Largest Kolmogorov-Smirnov distance of a marginal above which the fit is a warning.
 FIT_WARN = 0.05
@@ -167,178 +154,3 @@ def study_priors(study: Study) -> dict[str, Prior]:
     """The study's priors, with ``prior_from`` applied where it is set."""
     made = prior_from_draws(study)
     return study.priors() if made is None else made.priors
-
-
-# --------------------------------------------------------------------------- bayescal update
-
-#: Update study files beside the study's own: ``update-001.toml``, ``update-002.toml``, ...
-UPDATE_PATTERN = "update-{:03d}.toml"
-#: The history of the posterior over the updates, in the study's output folder.
-HISTORY_FILE = "update-history.csv"
-
-
-@dataclass(frozen=True)
-class Update:
-    """What ``bayescal update`` made: the update's study and the history of the posterior."""
-
-    study: Study
-    previous: Study
-    history: pd.DataFrame
-    files: dict[str, Path]
-
-
-def update_files(study: Study) -> list[Path]:
-    """The update study files of ``study``, in order."""
-    assert study.path is not None  # a loaded study has its file
-    root = Path(study.path).parent
-    found = []
-    k = 1
-    while (root / UPDATE_PATTERN.format(k)).is_file():
-        found.append(root / UPDATE_PATTERN.format(k))
-        k += 1
-    return found
-
-
-def _finished(study: Study) -> bool:
-    out = study.root / study.study.output_dir
-    return StageLog.open(out).finished("calibrate") and (out / posterior_store.FILE).is_file()
-
-
-def _local(instant: np.datetime64, zone: Any) -> str:
-    """A UTC clock instant as the study's local time text (data.start / data.end)."""
-    return pd.Timestamp(instant).tz_localize("UTC").tz_convert(zone).strftime("%Y-%m-%dT%H:%M:%S")
-
-
-def _update_raw(
-    previous: Study, base: Study, k: int, data: Path | None, end: pd.Timestamp | None
-) -> dict[str, Any]:
-    """The study dictionary of update ``k``: the previous study's, on the record from its
-    test window (less one warm-up) to ``end``, with the previous posterior as prior."""
-    from bayescal.data.measured import load_measured
-
-    measured = load_measured(previous)
-    layout = measured.layout
-    warmup = pd.Timedelta(measured.step, "s") * layout.warmup
-    first = measured.times[min(layout.test_begin, layout.n_total - 1)]
-    start_utc = pd.Timestamp(first) - warmup
-    assert previous.path is not None
-    raw = tomllib.loads(Path(previous.path).read_text(encoding="utf-8"))
-    section = raw.setdefault("data", {})
-    if data is not None:
-        section["file"] = str(Path(data).expanduser().resolve())
-    section["start"] = _local(start_utc.to_datetime64(), measured.zone)
-    if end is not None:
-        section["end"] = end.strftime("%Y-%m-%dT%H:%M:%S")
-    else:
-        section.pop("end", None)
-    begin = pd.Timestamp(section["start"])
-    stop = None if end is None else pd.Timestamp(end)
-    section["exclude"] = [
-        w
-        for w in section.get("exclude", [])
-        if pd.Timestamp(w["end"]) > begin and (stop is None or pd.Timestamp(w["start"]) < stop)
-    ]
-    if not section["exclude"]:
-        section.pop("exclude")
-    meta = raw.setdefault("study", {})
-    meta["prior_from"] = Path(previous.path).name
-    base_raw = tomllib.loads(Path(base.path or "").read_text(encoding="utf-8")).get("study", {})
-    meta["output_dir"] = f"{base_raw.get('output_dir', 'out')}/update-{k:03d}"
-    meta["name"] = f"{base.study.name} (update {k})"
-    return raw
-
-
-def _history_row(study: Study, label: str) -> dict[str, Any]:
-    from bayescal.data.measured import load_measured
-
-    out = study.root / study.study.output_dir
-    post = posterior_store.load_posterior(out / posterior_store.FILE)
-    measured = load_measured(study)
-    layout = measured.layout
-    row: dict[str, Any] = {
-        "update": label,
-        "study_file": Path(study.path or "").name,
-        "first_training": pd.Timestamp(measured.times[int(layout.train_starts[0])]),
-        "last_training": pd.Timestamp(
-            measured.times[int(layout.train_starts[-1]) + layout.period - 1]
-        ),
-        "training_periods": layout.m_star,
-    }
-    table = post.summary()
-    names = [*post.names, *post.derived]
-    for name in names:
-        if name in table.index:
-            for column in ("mean", "lower", "upper"):
-                row[f"{name}_{column}"] = float(np.asarray(table.loc[name, column], dtype=float))
-    return row
-
-
-def update(
-    study: Study,
-    *,
-    data: Path | None = None,
-    end: pd.Timestamp | None = None,
-    options: Any = None,
-    say: Callable[[str], None] | None = None,
-) -> Update:
-    """Add newly arrived data to a finished study: a sequential calibration.
-
-    The latest finished calibration (the study, or its last update) is the
-    previous one. Update ``k`` is the study file ``update-00k.toml`` beside the
-    study's: the previous study's settings on the record from the previous
-    test window (less one warm-up; the test window was never trained on) to
-    ``end`` (default: the end of the file, ``data`` or the study's own), with
-    ``[study] prior_from`` the previous study, written into
-    ``OUTPUT_DIR/update-00k``. Its simulator runs are made again (runs are
-    cached by their boundary conditions, and the record is new); its stages
-    are cached and resumable like any study's. The history of the posterior
-    (means and 95 % intervals of every parameter and derived quantity, with
-    the training days of each step) is written to ``OUTPUT_DIR/update-history.csv``.
-
-    Raises
-    ------
-    ConfigError
-        The study has no finished calibration, or no new data after it.
-    """
-    from bayescal.atomic import atomic_write_text
-    from bayescal.config.study import study_from_dict
-    from bayescal.pipeline.run import run as run_pipeline
-
-    tell = say or (lambda _: None)
-    if not _finished(study):
-        raise ConfigError(
-            f"{study.root / study.study.output_dir} holds no finished calibration to update",
-            hint=f"run `bayescal run {study.path}` first",
-        )
-    files = update_files(study)
-    previous = study
-    for path in files:
-        candidate = load_study(path)
-        if not _finished(candidate):
-            break
-        previous = candidate
-    # the update after the last finished one (an unfinished one is made again)
-    k = 1 if previous is study else files.index(Path(previous.path or "")) + 2
-    raw = _update_raw(previous, study, k, data, end)
-    path = Path(study.path or "").parent / UPDATE_PATTERN.format(k)
-    changed = study_from_dict(raw, root=study.root, source=str(path))
-    text = (
-        f"# Update {k} of {Path(study.path or '').name}, written by `bayescal update`: the study's "
-        "settings on the\n# newly arrived record, with the previous posterior as prior.\n"
-    )
-    atomic_write_text(path, text + tomli_w.dumps(raw))
-    changed = load_study(path)
-    tell(
-        f"update {k}: the record from {raw['data']['start']} on, with the posterior of "
-        f"{Path(previous.path or '').name} as prior; the simulator runs are made again on it"
-    )
-    run_pipeline(changed, options=options, say=tell)
-    rows = [_history_row(study, "0")]
-    for i, file in enumerate(update_files(study), start=1):
-        step = load_study(file)
-        if _finished(step):
-            rows.append(_history_row(step, str(i)))
-    history = pd.DataFrame(rows)
-    out = study.root / study.study.output_dir
-    written = {"history": atomic_write_text(out / HISTORY_FILE, history.to_csv(index=False))}
-    return Update(changed, previous, history, written)
