@@ -31,6 +31,7 @@ _SECTIONS: list[tuple[str, type[BaseModel], str]] = [
     ("[study]", cfg_study.StudySection, ""),
     ("[data]", cfg_data.DataSection, ""),
     ("[data.columns.<glossary name>]", cfg_data.ColumnSpec, ""),
+    ("[[data.exclude]]", cfg_data.ExcludeWindow, "one table per window"),
     ('[simulator] type = "wall"', cfg_simulators.WallSimulator, ""),
     ("[[simulator.layers]]", cfg_simulators.LayerSpec, "one table per layer, outside to inside"),
     ('[simulator] type = "box"', cfg_simulators.BoxSimulator, ""),
@@ -47,6 +48,7 @@ _SECTIONS: list[tuple[str, type[BaseModel], str]] = [
     ("[parameters.<name>]", cfg_parameters.Parameter, ""),
     ('prior = { distribution = "uniform", ... }', cfg_parameters.UniformPriorSpec, ""),
     ('prior = { distribution = "beta", ... }', cfg_parameters.BetaPriorSpec, ""),
+    ("[derived.<name>]", cfg_parameters.DerivedSpec, ""),
     ("[outputs]", cfg_study.OutputsSection, ""),
     ("[outputs.errors.<name>]", cfg_outputs.OutputError, ""),
     ("[periods]", cfg_study.PeriodsSection, ""),
@@ -58,6 +60,31 @@ _SECTIONS: list[tuple[str, type[BaseModel], str]] = [
     ("[runner]", cfg_study.RunnerSection, ""),
     ("[screening]", cfg_screening.ScreeningSection, ""),
 ]
+
+
+def documented_models() -> set[type[BaseModel]]:
+    """The configuration models that have a section in the reference."""
+    return {model for _, model, _ in _SECTIONS}
+
+
+def reachable_models(root: type[BaseModel] = cfg_study.Study) -> set[type[BaseModel]]:
+    """Every configuration model a study file can hold (through lists, dicts and unions)."""
+    found: set[type[BaseModel]] = set()
+
+    def walk(annotation: Any) -> None:
+        if isinstance(annotation, type) and issubclass(annotation, BaseModel):
+            if annotation in found:
+                return
+            found.add(annotation)
+            for field in annotation.model_fields.values():
+                walk(field.annotation)
+            return
+        for arg in typing.get_args(annotation):
+            walk(arg)
+
+    for field in root.model_fields.values():
+        walk(field.annotation)
+    return found
 
 
 def _type_name(annotation: Any) -> str:
