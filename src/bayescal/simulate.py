@@ -34,7 +34,8 @@ class SimulationCheck:
         The measured data.
     train, test
         Output name -> metrics over the training window (after the warm-up)
-        and over the test window.
+        and over the test window, for the calibrated outputs and the held-out
+        sensors.
     """
 
     parameters: dict[str, float]
@@ -65,8 +66,9 @@ def check_simulation(study: Study, overrides: Mapping[str, float] | None = None)
     layout = measured.layout
     first = int(layout.train_starts[0]) if layout.m_star else layout.warmup
     train, test = {}, {}
-    for name in study.outputs.calibrate:
-        sim, obs = simulated[name], measured.outputs[name]
+    observed = {**measured.outputs, **measured.held_out}  # held-out sensors are scored too
+    for name in (*study.outputs.calibrate, *study.outputs.held_out):
+        sim, obs = simulated[name], observed[name]
         train[name] = fit_metrics(sim[first : layout.test_begin], obs[first : layout.test_begin])
         test[name] = fit_metrics(sim[layout.test_begin :], obs[layout.test_begin :])
     return SimulationCheck(parameters, dict(simulated), measured, train, test)
@@ -81,14 +83,15 @@ def write_simulation(check: SimulationCheck, folder: Path, title: str = "") -> d
     frame = pd.DataFrame({"time_utc": pd.to_datetime(m.times)})
     for name, series in check.simulated.items():
         frame[f"{name}_simulated"] = series
-    for name, series in m.outputs.items():
+    observed = {**m.outputs, **m.held_out}
+    for name, series in observed.items():
         frame[f"{name}_measured"] = series
     csv = atomic_write_text(folder / "simulation.csv", frame.to_csv(index=False))
     png = plot_measured_vs_simulated(
         folder / "simulation.png",
         np.asarray(m.times),
-        m.outputs,
-        {k: check.simulated[k] for k in m.outputs},
+        observed,
+        {k: check.simulated[k] for k in observed},
         test_begin=m.layout.test_begin,
         warmup_end=int(m.layout.train_starts[0]) if m.layout.m_star else None,
         title=title,

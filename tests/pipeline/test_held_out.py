@@ -161,3 +161,15 @@ def test_a_held_out_sensor_needs_what_its_band_needs(
     folder = _study(tmp_path / "wall", HELD_OUT.replace(*edit))
     with pytest.raises(ConfigError, match=message):
         load_study(folder)
+
+
+def test_simulate_scores_the_held_out_sensor_too(tmp_path: Path) -> None:
+    from bayescal.simulate import check_simulation, write_simulation
+
+    check = check_simulation(load_study(_study(tmp_path / "wall")))
+    assert set(check.train) == {"heat_flux_in", "temp_interface_2"}
+    assert check.train["temp_interface_2"].n > 0
+    assert np.isfinite(check.train["temp_interface_2"].rmse)
+    files = write_simulation(check, tmp_path / "out")
+    header = files["csv"].read_text(encoding="utf-8").splitlines()[0]
+    assert "temp_interface_2_measured" in header
