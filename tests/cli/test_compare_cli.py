@@ -92,6 +92,12 @@ def test_a_second_comparison_reuses_the_scores(
     assert result.exit_code == 0, result.output
     assert "white: calibrate: up to date, reused" in result.output
     assert "white: leave-period-out scores up to date, reused" in result.output
+    # the cost is stated before anything runs, and each variant says when it starts
+    lines = result.output.splitlines()
+    assert lines[0].startswith("compare: 2 variants, up to about ")
+    assert "up to 1 refits of" in lines[0]
+    assert "variant 1 of 2: ar1" in lines
+    assert "variant 2 of 2: white" in lines
     again = pd.read_csv(root / "again" / "compare.csv")
     np.testing.assert_array_equal(again["elpd"], first["elpd"])
 

@@ -54,6 +54,7 @@ from bayescal.config import Study, load_study
 from bayescal.config.outputs import OutputError
 from bayescal.errors import BayescalError, ConfigError
 from bayescal.mcmc.diagnostics import Diagnostics
+from bayescal.pipeline.budget import estimate_time, format_seconds
 from bayescal.pipeline.keys import digest, stage_keys
 from bayescal.pipeline.run import Results, run
 from bayescal.pipeline.stages import Context, Options, prepare
@@ -492,8 +493,10 @@ def compare(
     contexts = [(label, prepare(s, opts)) for label, s in zip(labels, studies, strict=True)]
     for other in contexts[1:]:
         same_training_data(contexts[0], other)
+    note(_cost(contexts, max_refits))
     variants = []
-    for label, study in zip(labels, studies, strict=True):
+    for k, (label, study) in enumerate(zip(labels, studies, strict=True), start=1):
+        note(f"variant {k} of {len(studies)}: {label}")
         res = _calibrated(label, study, opts, note)
         scores = _score(label, res, opts, max_refits, draws_per_chain, note)
         note(
@@ -511,6 +514,30 @@ def compare(
     order = {label: k for k, label in enumerate(table["variant"])}
     ranked = tuple(sorted(variants, key=lambda v: order[v.label]))
     return Comparison(ranked, table, periods, tuple(notes), files)
+
+
+def _cost(contexts: Sequence[tuple[str, Context]], max_refits: int) -> str:
+    """What the comparison may cost, from each variant's sizes (:func:`estimate_time`):
+    its emulator and calibration where its output folder does not hold them yet, and
+    up to ``max_refits`` refits, each about one calibration."""
+    total = 0.0
+    parts = []
+    for label, ctx in contexts:
+        estimate = estimate_time(ctx.study, ctx.measured)
+        stages = {part.what: part.seconds for part in estimate.parts}
+        calibration = stages.get("calibration", 0.0)
+        first = stages.get("emulator", 0.0) + calibration
+        total += first + max_refits * calibration
+        parts.append(
+            f"{label} {format_seconds(first)} + up to {max_refits} refits of "
+            f"{format_seconds(calibration)}"
+        )
+    return (
+        f"compare: {len(contexts)} variants, up to about {format_seconds(total)} of MCMC "
+        f"and emulator training besides the simulator runs ({'; '.join(parts)}; stages "
+        "already in a study's output folder are reused, refits only where a period's "
+        "Pareto k exceeds 0.7): an order of magnitude from the studies' sizes"
+    )
 
 
 def _write(
