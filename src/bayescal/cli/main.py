@@ -661,6 +661,10 @@ def compare(
     period is predicted confidently wrong. Only the training periods are read:
     the test window is left for the final metrics of the variant chosen.
 
+    Before it starts it prints an order of magnitude of its cost (each
+    variant's emulator and calibration from its sizes, and up to --max-refits
+    refits of a calibration each), then a line as each variant starts.
+
     Writes compare.csv (the ranking), compare-periods.csv (every period of
     every variant), compare.png and compare.md into --output; each study keeps
     its scores in OUTPUT_DIR/leave-period-out.npz for the next comparison.
