@@ -73,7 +73,7 @@ details>summary{cursor:pointer}section>details>summary{border-bottom:2px solid #
 details>summary>h2{display:inline-block;margin:.6em 0 .2em;border:none;padding:0}
 .answer td{white-space:nowrap}.answer td:last-child,.answer th:last-child,.fit td:nth-child(2),
 .fit th:nth-child(2){text-align:left}
-.answer td:last-child{white-space:normal;min-width:14em}
+.answer td:last-child{white-space:normal;min-width:16em}
 section{margin-bottom:.3em}
 .scroll{overflow-x:auto;max-width:100%;margin:.4em 0 1em}
 table{border-collapse:collapse;font-size:.9em}
@@ -490,9 +490,12 @@ def _summary(inputs: ReportInputs) -> str:
         + f'<div class="answer">{quantities_table(post, inputs.nominal, _table)}</div>'
         + '<p class="note">Catalogue: the nominal parameters of the study file and the '
         "derived quantities computed at them. Posterior mean and central 95 % credible "
-        "interval; contraction: how much the data narrowed a parameter's prior (100 %: "
-        "fixed by the data, 0 %: the prior unchanged). R-hat and ESS: Calibration "
-        "parameters.</p>"
+        "interval, to two significant digits of the interval's width; they are the "
+        "uncertainty of the calibrated parameters given this model and these data: what "
+        "the model holds fixed (layer thicknesses, densities, the parameters not "
+        "calibrated) adds none. Contraction: how much the data narrowed a parameter's "
+        "prior (100 %: fixed by the data, 0 %: the prior unchanged). R-hat and ESS: "
+        "Calibration parameters.</p>"
     )
     desc = f'<p class="desc">{_e(inputs.description)}</p>' if inputs.description else ""
     run = f"<details><summary>The run</summary>{_table(['item', 'value'], facts)}</details>"
