@@ -457,3 +457,13 @@ def test_settings_state_the_emulator_training_used(tmp_path: Path) -> None:
     assert ctx.study.emulator.training == "map"
     assert str(settings["emulator training ([emulator] training)"]).startswith("map: ")
     assert not any("MCMC (burn" in str(key) for key in settings)
+    assert settings["in-likelihood discrepancy ([outputs.errors.NAME] discrepancy)"] == "none"
+    assert settings["difference process Δ ([discrepancy] enabled)"] == "not used"
+    # an in-likelihood discrepancy is named as the summary and the uncertainty table name it
+    path = folder / "study.toml"
+    text = path.read_text(encoding="utf-8")
+    path.write_text(text + "\n[outputs.errors.heat_flux_in]\ndiscrepancy = true\n", "utf-8")
+    ctx = prepare(load_study(folder))
+    settings = report_settings(ctx.study, ctx.measured.layout)
+    shown = settings["in-likelihood discrepancy ([outputs.errors.NAME] discrepancy)"]
+    assert shown == "heat_flux_in (over the periods' conditions)"

@@ -635,7 +635,7 @@ def _discrepancy(inputs: ReportInputs) -> str:
         f"{_e(inside)}."
         + (
             " Its variance is sampled with θ* inside the calibration's likelihood (the rows "
-            "<code>delta_rel…</code>, <code>delta_ind…</code> under Calibration parameters), "
+            "<code>delta_rel</code> or <code>delta_ind</code> under Calibration parameters), "
             "and the prediction bands add it conditioned on the training residuals "
             "(Uncertainty)."
             if inside != "none"

@@ -89,10 +89,15 @@ def _emulator_training(study: Study) -> str:
     )
 
 
+def _kind(discrepancy: object) -> str:
+    """``True`` is the discrepancy over the conditions."""
+    return "conditions" if discrepancy is True else str(discrepancy)
+
+
 def _in_likelihood(study: Study) -> str:
     """The outputs with an in-likelihood discrepancy and its kind, else ``"none"``."""
     used = [
-        f"{name} ({DISCREPANCY_KINDS.get(str(spec.discrepancy), 'over the conditions')})"
+        f"{name} ({DISCREPANCY_KINDS[_kind(spec.discrepancy)]})"
         for name, spec in study.outputs.errors.items()
         if spec.discrepancy
     ]
@@ -126,7 +131,9 @@ def report_settings(
         f"{_calibration_longer(s)})",
         "algebra": s.emulator.algebra,
         "in-likelihood discrepancy ([outputs.errors.NAME] discrepancy)": _in_likelihood(study),
-        "difference process Δ ([discrepancy] enabled)": s.discrepancy.enabled,
+        "difference process Δ ([discrepancy] enabled)": (
+            "enabled" if s.discrepancy.enabled else "not used"
+        ),
         "seed": s.study.seed,
     }
     if s.discrepancy.enabled:
