@@ -38,9 +38,9 @@ def test_a_band_within_the_honest_range_holds() -> None:
 def test_a_band_outside_the_honest_range_is_too_narrow_or_too_wide() -> None:
     low, _ = honest_range(0.95, 300.0)
     (line,) = band_lines(_metrics(0.95, low - 0.05))
-    assert line.startswith("q: the 95 % band too narrow: ")
+    assert line.startswith("q: the 95 % band is too narrow: ")
     (line,) = band_lines(_metrics(1.0, 0.95))
-    assert line.startswith("q: the 95 % band too wide: ")
+    assert line.startswith("q: the 95 % band is too wide: ")
 
 
 def test_the_fit_table_compares_with_the_catalogue_per_window() -> None:

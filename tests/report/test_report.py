@@ -467,3 +467,16 @@ def test_settings_state_the_emulator_training_used(tmp_path: Path) -> None:
     settings = report_settings(ctx.study, ctx.measured.layout)
     shown = settings["in-likelihood discrepancy ([outputs.errors.NAME] discrepancy)"]
     assert shown == "heat_flux_in (over the periods' conditions)"
+
+
+def test_many_warnings_fold_after_the_first_few(parts: Parts) -> None:
+    """A short run failing every diagnostic must not push the answer off the first screen:
+    the first five warnings show, the rest fold under them."""
+    warnings = tuple(f"warning number {k}" for k in range(8))
+    inputs = dataclasses.replace(
+        _inputs(parts, with_delta=False, failures=False), warnings=warnings
+    )
+    text = render(inputs, [])
+    folded = text.index("<details><summary>3 more warning(s)</summary>")
+    assert text.index("<li>warning number 4</li>") < folded < text.index("warning number 5")
+    assert folded < text.index("<table")

@@ -209,11 +209,11 @@ def band_lines(metrics: pd.DataFrame, level: float = 0.95) -> list[str]:
             parts = [_band_part(r, level) for _, r in rows.iterrows()]
             verdicts = {v for v, _ in parts if v != "unknown"}
             if not verdicts:
-                verdict = "not known"
+                verdict = "is not known"
             elif verdicts == {"holds"}:
                 verdict = "holds"
             else:
-                verdict = " and ".join(sorted(verdicts - {"holds"}))
+                verdict = "is " + " on one window, ".join(sorted(verdicts - {"holds"}))
             who = output if model == "calibrated" else f"{output} (calibrated + Δ)"
             lines.append(
                 f"{who}: the {100 * level:g} % band {verdict}: " + "; ".join(t for _, t in parts)

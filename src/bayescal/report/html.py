@@ -63,6 +63,8 @@ SECTIONS = (
     "Settings",
 )
 WINDOWS = {"train": "training window", "test": "test window"}
+#: Warnings shown open on the first screen; the others fold under them.
+SHOWN_WARNINGS = 5
 
 CSS = """
 body{font-family:system-ui,-apple-system,"Segoe UI",sans-serif;margin:1em auto;max-width:1150px;
@@ -459,8 +461,16 @@ def _summary(inputs: ReportInputs) -> str:
         ("difference process Δ ([discrepancy] enabled)", difference),
     ]
     if inputs.warnings:
-        items = "".join(f"<li>{_e(w)}</li>" for w in inputs.warnings)
-        box = f'<div class="warn"><strong>Warnings</strong><ul>{items}</ul></div>'
+        # the first few open (the trust warnings come first), the rest fold: the answer
+        # below stays on the first screen when every diagnostic of a short run fails
+        shown, more = inputs.warnings[:SHOWN_WARNINGS], inputs.warnings[SHOWN_WARNINGS:]
+        items = "".join(f"<li>{_e(w)}</li>" for w in shown)
+        rest = "".join(f"<li>{_e(w)}</li>" for w in more)
+        if more:
+            rest = (
+                f"<details><summary>{len(more)} more warning(s)</summary><ul>{rest}</ul></details>"
+            )
+        box = f'<div class="warn"><strong>Warnings</strong><ul>{items}</ul>{rest}</div>'
     else:
         box = (
             '<div class="ok">No warnings: every diagnostic check passed, no parameter leans '
