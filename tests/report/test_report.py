@@ -235,7 +235,9 @@ def test_report_without_discrepancy_or_failures_and_with_two_outputs(
     assert "MSE [(W/m²)²]" in text
     assert "MSE [°C²]" in text
     assert "No simulator run failed." in text
-    assert "No discrepancy Δ was estimated." in text
+    assert "The difference process Δ (<code>[discrepancy] enabled</code>" in text
+    assert "was not used: no Δ was estimated." in text
+    assert "<code>[outputs.errors.NAME] discrepancy</code>): none." in text
     assert 'class="ok"' in text
     assert "calibrated + Δ" not in text
 
@@ -401,3 +403,80 @@ def test_the_first_screen_says_when_the_calibration_did_not_help(
     plain = page(parts.post, metrics_table(parts.ds_plain), "plain")
     assert "leans on" not in plain
     assert "heat_flux_in (test window): " in plain[: plain.index("<table")]
+
+
+def test_the_first_screen_is_the_answer(parts: Parts) -> None:
+    """The fit table, the calibrated quantities beside their catalogue values, the
+    convergence verdict and one band line per output come before any folded section;
+    every other section folds; tables scroll inside their box."""
+    from bayescal.calibration.posterior import Derived
+
+    post = parts.post
+    k = post.draws[..., post.names.index("k_cb")]
+    derived = {"R_layer": Derived(0.15 / k, "m²·K/W", "resistance of the layer")}
+    nominal = {"k_cb": 0.12, "R_layer": 0.15 / 0.12}
+    inputs = dataclasses.replace(
+        _inputs(parts, with_delta=False, failures=False),
+        posterior=post.with_derived(derived),
+        nominal=nominal,
+    )
+    text = render(inputs, [])
+    first = text[: text.index("<details><summary><h2>")]
+    for title in SECTIONS[1:]:
+        assert f"<details><summary><h2>{title}</h2></summary>" in text, title
+    assert "<h2>Summary</h2>" in first
+    assert "<th>nominal (catalogue)</th><th>calibrated</th>" in first
+    assert "<td>test window (out of sample)</td>" in first
+    rows = inputs.metrics
+    test_rmse = rows[(rows["window"] == "test") & (rows["model"] == "calibrated")]["rmse"]
+    assert f"<td>{float(test_rmse.iloc[0]):.4g}</td>" in first
+    flat = (0.15 / k).reshape(-1)
+    low, high = np.percentile(flat, [2.5, 97.5])
+    row = re.search(
+        r"<td>R_layer</td><td>m²·K/W</td><td>([0-9.]+)</td><td>([0-9.]+) – ([0-9.]+)</td>"
+        r"<td>([0-9.]+)</td>",
+        first,
+    )
+    assert row, "no row of R_layer"
+    shown = [float(v) for v in row.groups()]
+    # two significant digits of the interval's width: within a tenth of it
+    np.testing.assert_allclose(shown[:3], [np.mean(flat), low, high], atol=(high - low) / 10)
+    assert shown[3] == pytest.approx(0.15 / 0.12, rel=1e-4)
+    assert first.index("<td>R_layer</td>") < first.index("<td>k_cb</td>")  # derived first
+    assert "<td>cp_cb</td>" in first  # every parameter; no nominal given: "–"
+    assert "Converged?" in first
+    assert "heat_flux_in: the 95 % band " in first
+    assert 'class="scroll"><table>' in text
+    assert "overflow-x:auto" in text
+
+
+def test_settings_state_the_emulator_training_used(tmp_path: Path) -> None:
+    folder = copy_example("wall", tmp_path / "wall")
+    ctx = prepare(load_study(folder))
+    settings = report_settings(ctx.study, ctx.measured.layout)
+    assert ctx.study.emulator.training == "map"
+    assert str(settings["emulator training ([emulator] training)"]).startswith("map: ")
+    assert not any("MCMC (burn" in str(key) for key in settings)
+    assert settings["in-likelihood discrepancy ([outputs.errors.NAME] discrepancy)"] == "none"
+    assert settings["difference process Δ ([discrepancy] enabled)"] == "not used"
+    # an in-likelihood discrepancy is named as the summary and the uncertainty table name it
+    path = folder / "study.toml"
+    text = path.read_text(encoding="utf-8")
+    path.write_text(text + "\n[outputs.errors.heat_flux_in]\ndiscrepancy = true\n", "utf-8")
+    ctx = prepare(load_study(folder))
+    settings = report_settings(ctx.study, ctx.measured.layout)
+    shown = settings["in-likelihood discrepancy ([outputs.errors.NAME] discrepancy)"]
+    assert shown == "heat_flux_in (over the periods' conditions)"
+
+
+def test_many_warnings_fold_after_the_first_few(parts: Parts) -> None:
+    """A short run failing every diagnostic must not push the answer off the first screen:
+    the first five warnings show, the rest fold under them."""
+    warnings = tuple(f"warning number {k}" for k in range(8))
+    inputs = dataclasses.replace(
+        _inputs(parts, with_delta=False, failures=False), warnings=warnings
+    )
+    text = render(inputs, [])
+    folded = text.index("<details><summary>3 more warning(s)</summary>")
+    assert text.index("<li>warning number 4</li>") < folded < text.index("warning number 5")
+    assert folded < text.index("<table")

@@ -48,6 +48,7 @@ from bayescal.pipeline.stages import (
     calibrate_stage,
     discrepancy_stage,
     make_design,
+    nominal_derived,
     nominal_run,
     predict_stage,
     prepare,
@@ -509,6 +510,7 @@ def write_study_report(res: Results) -> Path:
         discrepancy=res.discrepancy,
         predictions=res.predictions.dataset,
         metrics=res.predictions.metrics,
+        nominal_derived=nominal_derived(res.context, tuple(res.posterior.names)),
     )
 
 

@@ -66,6 +66,7 @@ __all__ = [
     "calibrate_stage",
     "discrepancy_stage",
     "make_design",
+    "nominal_derived",
     "predict_stage",
     "prepare",
     "simulate",
@@ -371,23 +372,45 @@ def calibrate_stage(
     return post.with_derived(derived_draws(ctx, post))
 
 
+def _derived_values(
+    ctx: Context, names: tuple[str, ...], values: np.ndarray
+) -> dict[str, tuple[np.ndarray, str, str]]:
+    """The simulator's derived quantities and the study's ``[derived]`` at each row of
+    ``values`` (``(rows, len(names))``, physical units): quantity -> (values, unit, text)."""
+    out: dict[str, tuple[np.ndarray, str, str]] = {}
+    sim = ctx.simulator
+    if isinstance(sim, Derivable) and sim.derived_units:
+        rows = [sim.derived(dict(zip(names, map(float, row), strict=True))) for row in values]
+        for quantity, (unit, text) in sim.derived_units.items():
+            out[quantity] = (np.array([r[quantity] for r in rows]), unit, text)
+    by_name = {n: values[:, k] for k, n in enumerate(names)}
+    for quantity, expression in ctx.study.expressions().items():
+        spec = ctx.study.derived[quantity]
+        column = np.broadcast_to(expression.evaluate(by_name), values.shape[:1])
+        out[quantity] = (np.asarray(column, dtype=float), spec.unit, spec.description)
+    return out
+
+
 def derived_draws(ctx: Context, posterior: Posterior) -> dict[str, Derived]:
     """The simulator's derived quantities and the study's ``[derived]`` at every draw."""
     draws = posterior.draws
-    names = posterior.names
-    out: dict[str, Derived] = {}
-    sim = ctx.simulator
-    if isinstance(sim, Derivable) and sim.derived_units:
-        flat = draws.reshape(-1, len(names))
-        rows = [sim.derived(dict(zip(names, map(float, row), strict=True))) for row in flat]
-        for quantity, (unit, text) in sim.derived_units.items():
-            column = np.array([r[quantity] for r in rows]).reshape(draws.shape[:2])
-            out[quantity] = Derived(column, unit, text)
-    by_name = {n: draws[..., k] for k, n in enumerate(names)}
-    for quantity, expression in ctx.study.expressions().items():
-        spec = ctx.study.derived[quantity]
-        out[quantity] = Derived(expression.evaluate(by_name), spec.unit, spec.description)
-    return out
+    names = tuple(posterior.names)
+    found = _derived_values(ctx, names, draws.reshape(-1, len(names)))
+    return {
+        quantity: Derived(column.reshape(draws.shape[:2]), unit, text)
+        for quantity, (column, unit, text) in found.items()
+    }
+
+
+def nominal_derived(ctx: Context, names: tuple[str, ...]) -> dict[str, float]:
+    """The derived quantities at the nominal parameters (their catalogue values).
+
+    ``names`` are the calibrated parameters, as the posterior's draws hold them
+    (the others keep their nominal values in the simulator either way).
+    """
+    nominal = nominal_parameters(ctx.study)
+    values = np.array([[nominal[n] for n in names]], dtype=float)
+    return {q: float(v[0]) for q, (v, _, _) in _derived_values(ctx, names, values).items()}
 
 
 def discrepancy_stage(

@@ -19,7 +19,7 @@ import base64
 import html
 import re
 from collections.abc import Callable, Iterable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
@@ -37,6 +37,13 @@ from bayescal.emulator.noise import RELATIVE_UNIT
 from bayescal.glossary import GLOSSARY
 from bayescal.metrics import MODELS, MetricColumn, band_notes, metric_columns
 from bayescal.report import figures as fg
+from bayescal.report.answer import (
+    band_lines,
+    convergence_line,
+    discrepancy_used,
+    fit_table,
+    quantities_table,
+)
 from bayescal.report.uncertainty import uncertainty_figures, uncertainty_section
 from bayescal.runner import RunFailure
 
@@ -56,19 +63,30 @@ SECTIONS = (
     "Settings",
 )
 WINDOWS = {"train": "training window", "test": "test window"}
+#: Warnings shown open on the first screen; the others fold under them.
+SHOWN_WARNINGS = 5
 
 CSS = """
-body{font-family:system-ui,-apple-system,"Segoe UI",sans-serif;margin:2em auto;max-width:1150px;
-padding:0 1em;color:#222;line-height:1.45}
-h1{margin-bottom:.2em}h2{border-bottom:2px solid #ddd;padding-bottom:.2em;margin-top:2em}
-table{border-collapse:collapse;margin:.6em 0 1.2em;font-size:.9em}
+body{font-family:system-ui,-apple-system,"Segoe UI",sans-serif;margin:1em auto;max-width:1150px;
+padding:0 1em;color:#222;line-height:1.4;overflow-wrap:break-word}
+h1{margin:.3em 0 .2em;font-size:1.7em}h2{border-bottom:2px solid #ddd;padding-bottom:.2em;
+margin:1.2em 0 .4em;font-size:1.35em}h3{margin:.8em 0 .3em;font-size:1.08em}
+details>summary{cursor:pointer}section>details>summary{border-bottom:2px solid #ddd}
+details>summary>h2{display:inline-block;margin:.6em 0 .2em;border:none;padding:0}
+.answer td{white-space:nowrap}.answer td:last-child,.answer th:last-child,.fit td:nth-child(2),
+.fit th:nth-child(2){text-align:left}
+.answer td:last-child{white-space:normal;min-width:16em}
+section{margin-bottom:.3em}
+.scroll{overflow-x:auto;max-width:100%;margin:.4em 0 1em}
+table{border-collapse:collapse;font-size:.9em}
 th,td{border:1px solid #ccc;padding:.25em .6em;text-align:right}
 th{background:#f2f2f2}td:first-child,th:first-child{text-align:left}
 .warn{background:#fff3cd;border:2px solid #e0a800;padding:.6em 1em;border-radius:4px}
 .ok{background:#e8f5e9;border:1px solid #66bb6a;padding:.6em 1em;border-radius:4px}
-.catalogue{border:1px solid #bbb;padding:.6em 1em;border-radius:4px;margin-top:.6em}
+.catalogue{border:1px solid #bbb;padding:.4em 1em;border-radius:4px;margin-top:.6em}
+.verdict p{margin:.3em 0}.verdict ul{margin:.1em 0 .3em}.fail{color:#b00020;font-weight:bold}
 .desc{white-space:pre-wrap}.note{color:#555;font-size:.9em}
-figure{margin:1em 0}img{max-width:100%;border:1px solid #eee}
+figure{margin:1em 0}img{max-width:100%;height:auto;border:1px solid #eee}
 figcaption{font-size:.9em;color:#444}code{background:#f6f6f6;padding:0 .2em}
 """
 
@@ -113,6 +131,10 @@ class ReportInputs:
         One line per output: the calibrated prediction against the nominal
         (catalogue) one out of sample (:mod:`bayescal.report.trust`), shown at
         the top under the warnings.
+    nominal
+        Catalogue values: the nominal parameters and the derived quantities at
+        them, shown beside the posterior's on the first screen (a name missing
+        here shows "–").
     """
 
     study_name: str
@@ -131,6 +153,7 @@ class ReportInputs:
     warnings: tuple[str, ...]
     settings: dict[str, object]
     catalogue: tuple[str, ...] = ()
+    nominal: Mapping[str, float] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -168,7 +191,8 @@ def _table(header: Sequence[str], rows: Iterable[Sequence[object]]) -> str:
     """An HTML table; every cell is converted with ``str`` and escaped."""
     head = "".join(f"<th>{_e(h)}</th>" for h in header)
     body = "".join("<tr>" + "".join(f"<td>{_e(c)}</td>" for c in row) + "</tr>" for row in rows)
-    return f"<table><thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>"
+    table = f"<table><thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>"
+    return f'<div class="scroll">{table}</div>'
 
 
 def _unit(name: str) -> str:
@@ -420,8 +444,10 @@ def write_figures(inputs: ReportInputs, folder: str | Path) -> list[FigureEntry]
 
 
 def _summary(inputs: ReportInputs) -> str:
-    post = inputs.posterior
+    """The first screen: warnings, the verdicts, the fit, the calibrated quantities."""
+    post, ds = inputs.posterior, inputs.predictions
     chains, draws = post.lam.shape
+    inside, difference = discrepancy_used(post, inputs.discrepancy_posterior)
     facts = [
         ("study", inputs.study_name),
         ("configuration hash", inputs.config_hash),
@@ -429,27 +455,61 @@ def _summary(inputs: ReportInputs) -> str:
         ("bayescal version", __version__),
         ("simulator runs", f"{inputs.design.runs} ({len(inputs.failures)} failed)"),
         ("calibration parameters", ", ".join(post.names)),
-        ("outputs", ", ".join(_outputs(inputs.predictions))),
+        ("outputs", ", ".join(_outputs(ds))),
         ("posterior draws", f"{chains} chains × {draws} draws"),
-        ("discrepancy", "estimated" if inputs.discrepancy_posterior else "not estimated"),
+        ("in-likelihood discrepancy ([outputs.errors.NAME] discrepancy)", inside),
+        ("difference process Δ ([discrepancy] enabled)", difference),
     ]
     if inputs.warnings:
-        items = "".join(f"<li>{_e(w)}</li>" for w in inputs.warnings)
-        box = f'<div class="warn"><strong>Warnings</strong><ul>{items}</ul></div>'
+        # the first few open (the trust warnings come first), the rest fold: the answer
+        # below stays on the first screen when every diagnostic of a short run fails
+        shown, more = inputs.warnings[:SHOWN_WARNINGS], inputs.warnings[SHOWN_WARNINGS:]
+        items = "".join(f"<li>{_e(w)}</li>" for w in shown)
+        rest = "".join(f"<li>{_e(w)}</li>" for w in more)
+        if more:
+            rest = (
+                f"<details><summary>{len(more)} more warning(s)</summary><ul>{rest}</ul></details>"
+            )
+        box = f'<div class="warn"><strong>Warnings</strong><ul>{items}</ul>{rest}</div>'
     else:
         box = (
             '<div class="ok">No warnings: every diagnostic check passed, no parameter leans '
             "on a bound of its prior, and no calibrated prediction is worse than the nominal "
             "out of sample.</div>"
         )
+    passed, converged = convergence_line(post, inputs.discrepancy_posterior)
+    css = "" if passed else ' class="fail"'
+    verdicts = f"<p><b>Converged?</b> <span{css}>{_e(converged)}</span></p>"
     if inputs.catalogue:
         items = "".join(f"<li>{_e(line)}</li>" for line in inputs.catalogue)
-        box += (
-            '<div class="catalogue"><strong>Out of sample, calibrated against nominal '
-            f"(catalogue) parameters</strong> (RMSE; within 5 %: no better)<ul>{items}</ul></div>"
+        verdicts += (
+            "<p><b>Did the calibration help?</b> Out of sample, calibrated against nominal "
+            f"(catalogue) parameters (RMSE; within 5 %: no better):</p><ul>{items}</ul>"
         )
+    bands = band_lines(inputs.metrics, float(ds.attrs.get("level", 0.95)))
+    if bands:
+        items = "".join(f"<li>{_e(line)}</li>" for line in bands)
+        verdicts += f"<p><b>Do the bands hold?</b></p><ul>{items}</ul>"
+    box += f'<div class="catalogue verdict">{verdicts}</div>'
+    fit = (
+        "<h3>RMSE of the nominal (catalogue) and the calibrated prediction</h3>"
+        f'<div class="fit">{fit_table(inputs.metrics, _held_out(ds), _table)}</div>'
+    )
+    quantities = (
+        "<h3>Calibrated quantities beside their catalogue values</h3>"
+        + f'<div class="answer">{quantities_table(post, inputs.nominal, _table)}</div>'
+        + '<p class="note">Catalogue: the nominal parameters of the study file and the '
+        "derived quantities computed at them. Posterior mean and central 95 % credible "
+        "interval, to two significant digits of the interval's width; they are the "
+        "uncertainty of the calibrated parameters given this model and these data: what "
+        "the model holds fixed (layer thicknesses, densities, the parameters not "
+        "calibrated) adds none. Contraction: how much the data narrowed a parameter's "
+        "prior (100 %: fixed by the data, 0 %: the prior unchanged). R-hat and ESS: "
+        "Calibration parameters.</p>"
+    )
     desc = f'<p class="desc">{_e(inputs.description)}</p>' if inputs.description else ""
-    return desc + box + _table(["item", "value"], facts)
+    run = f"<details><summary>The run</summary>{_table(['item', 'value'], facts)}</details>"
+    return desc + box + fit + quantities + run
 
 
 def _ess(value: object) -> str:
@@ -579,9 +639,29 @@ def _emulator(inputs: ReportInputs) -> str:
 
 
 def _discrepancy(inputs: ReportInputs) -> str:
+    inside, _ = discrepancy_used(inputs.posterior, inputs.discrepancy_posterior)
+    used = (
+        "<p>In-likelihood discrepancy (<code>[outputs.errors.NAME] discrepancy</code>): "
+        f"{_e(inside)}."
+        + (
+            " Its variance is sampled with θ* inside the calibration's likelihood (the rows "
+            "<code>delta_rel</code> or <code>delta_ind</code> under Calibration parameters), "
+            "and the prediction bands add it conditioned on the training residuals "
+            "(Uncertainty)."
+            if inside != "none"
+            else ""
+        )
+        + "</p>"
+    )
     if inputs.discrepancy_posterior is None and inputs.delta_explained is None:
-        return "<p>No discrepancy Δ was estimated.</p>"
-    parts = []
+        return used + (
+            "<p>The difference process Δ (<code>[discrepancy] enabled</code>, the paper's "
+            "second phase) was not used: no Δ was estimated.</p>"
+        )
+    parts = [
+        used,
+        "<p>The difference process Δ (<code>[discrepancy] enabled</code>) was estimated.</p>",
+    ]
     if inputs.delta_explained:
         rows = [[o, _num(100.0 * v)] for o, v in inputs.delta_explained.items()]
         parts.append(_table(["output", "training residual variance explained by Δ [%]"], rows))
@@ -666,8 +746,15 @@ def render(inputs: ReportInputs, entries: Sequence[FigureEntry]) -> str:
         "Design": _design(inputs.design, inputs.failures),
         "Settings": _settings(inputs.settings),
     }
+    # The first screen is the answer (Summary); every other section folds.
     sections = "".join(
-        f'<section id="{_slug(title).lower()}"><h2>{_e(title)}</h2>{bodies[title]}</section>'
+        f'<section id="{_slug(title).lower()}">'
+        + (
+            f"<h2>{_e(title)}</h2>{bodies[title]}"
+            if title == SECTIONS[0]
+            else f"<details><summary><h2>{_e(title)}</h2></summary>{bodies[title]}</details>"
+        )
+        + "</section>"
         for title in SECTIONS
     )
     title = _e(f"bayescal report: {inputs.study_name}")

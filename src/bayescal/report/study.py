@@ -11,7 +11,7 @@ condition; :func:`bayescal.report.html.write_report` writes the page.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -24,6 +24,7 @@ from bayescal.design import Design
 from bayescal.discrepancy import Discrepancy
 from bayescal.emulator.gp import Emulator, LooResult
 from bayescal.periods import PeriodLayout
+from bayescal.report.answer import DISCREPANCY_KINDS
 from bayescal.report.html import ReportInputs, write_report
 from bayescal.report.trust import catalogue_verdicts, held_out_outputs, trust_warnings
 from bayescal.runner import RunFailure
@@ -74,6 +75,35 @@ def _calibration_longer(study: Study) -> str:
     return f", extended up to {cal.most_samples} until converged"
 
 
+def _emulator_training(study: Study) -> str:
+    """How the emulator's hyperparameters were found, as ``[emulator] training`` says."""
+    em = study.emulator
+    if em.training == "map":
+        return (
+            "map: multi-start L-BFGS-B search of the hyperparameters' MAP with the exact "
+            f"gradient, {em.samples} draws of its Laplace approximation"
+        )
+    return (
+        f"mcmc: Metropolis-within-Gibbs, 2 chains x ({em.burn} + {em.samples}), "
+        "best draw refined by L-BFGS-B"
+    )
+
+
+def _kind(discrepancy: object) -> str:
+    """``True`` is the discrepancy over the conditions."""
+    return "conditions" if discrepancy is True else str(discrepancy)
+
+
+def _in_likelihood(study: Study) -> str:
+    """The outputs with an in-likelihood discrepancy and its kind, else ``"none"``."""
+    used = [
+        f"{name} ({DISCREPANCY_KINDS[_kind(spec.discrepancy)]})"
+        for name, spec in study.outputs.errors.items()
+        if spec.discrepancy
+    ]
+    return ", ".join(used) or "none"
+
+
 def report_settings(
     study: Study, layout: PeriodLayout, emulator: Emulator | None = None
 ) -> dict[str, object]:
@@ -95,12 +125,15 @@ def report_settings(
         "training periods m*": layout.m_star,
         "samples per period": layout.period,
         "test samples": layout.test,
-        "emulator MCMC (burn + kept, 2 chains)": f"{s.emulator.burn} + {s.emulator.samples}",
+        "emulator training ([emulator] training)": _emulator_training(study),
         "calibration MCMC": f"{SAMPLER_NAMES[s.calibration.sampler]}, "
         f"{s.calibration.chains} chains x ({s.calibration.burn} + {s.calibration.samples}"
         f"{_calibration_longer(s)})",
         "algebra": s.emulator.algebra,
-        "discrepancy": s.discrepancy.enabled,
+        "in-likelihood discrepancy ([outputs.errors.NAME] discrepancy)": _in_likelihood(study),
+        "difference process Δ ([discrepancy] enabled)": (
+            "enabled" if s.discrepancy.enabled else "not used"
+        ),
         "seed": s.study.seed,
     }
     if s.discrepancy.enabled:
@@ -129,6 +162,7 @@ def write_study_report(
     discrepancy: Discrepancy | None,
     predictions: xr.Dataset,
     metrics: pd.DataFrame,
+    nominal_derived: Mapping[str, float] | None = None,
 ) -> Path:
     """Write the HTML report of a study's results into ``folder``.
 
@@ -152,6 +186,9 @@ def write_study_report(
         The difference process, if it was estimated.
     predictions, metrics
         The predictions dataset and the metrics table.
+    nominal_derived
+        The derived quantities at the nominal parameters (catalogue values
+        shown beside the posterior's), where computed.
 
     Returns
     -------
@@ -180,5 +217,9 @@ def write_study_report(
         warnings=tuple(warnings),
         catalogue=tuple(v.line() for v in catalogue_verdicts(metrics, held)),
         settings=report_settings(study, layout, emulator),
+        nominal={
+            **{name: p.nominal for name, p in study.parameters.items()},
+            **(nominal_derived or {}),
+        },
     )
     return write_report(inputs, folder)

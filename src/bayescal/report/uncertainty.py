@@ -21,6 +21,7 @@ import xarray as xr
 
 from bayescal.calibration.identifiability import Identifiability, identifiability
 from bayescal.calibration.posterior import Posterior
+from bayescal.report.answer import DISCREPANCY_KINDS
 from bayescal.report.figures import save_figure
 
 __all__ = ["BAND_TEXT", "plot_correlation", "plot_pit", "uncertainty_section"]
@@ -123,7 +124,13 @@ def uncertainty_section(
             rows.append(
                 [
                     o.name,
-                    o.model + (f" + discrepancy ({o.discrepancy})" if o.discrepancy else ""),
+                    o.model
+                    + (
+                        " + in-likelihood discrepancy "
+                        f"({DISCREPANCY_KINDS.get(str(o.discrepancy), str(o.discrepancy))})"
+                        if o.discrepancy
+                        else ""
+                    ),
                     f"{np.mean(sd):.4g} {o.unit}",
                     f"[{low:.4g}, {high:.4g}]",
                     "–" if in_band is None else f"{float(in_band):.4g} {o.unit}",
