@@ -8,9 +8,9 @@ its key path, the value received and what was expected, on one line
 (:mod:`bayescal.config.messages`).
 
 This module holds :class:`Study`, the small sections (``[study]``,
-``[outputs]``, ``[periods]``, ``[design]``, ``[emulator]``,
+``[outputs]``, ``[periods]``, ``[emulator]``,
 ``[calibration]``, ``[predict]``, ``[runner]``) and the checks across
-sections; ``[data]``, ``[parameters]``, ``[simulator]``, ``[discrepancy]`` and
+sections; ``[data]``, ``[design]``, ``[parameters]``, ``[simulator]``, ``[discrepancy]`` and
 ``[screening]`` have modules of their own in :mod:`bayescal.config`.
 """
 
@@ -46,6 +46,7 @@ from bayescal.config.base import (
 )
 from bayescal.config.calibration import CalibrationSection
 from bayescal.config.data import DataSection
+from bayescal.config.design import DesignSection
 from bayescal.config.discrepancy import DiscrepancySection
 from bayescal.config.messages import format_errors
 from bayescal.config.outputs import OutputsSection
@@ -168,18 +169,6 @@ class PeriodsSection(Section):
         if self.warmup < timedelta(0):
             raise ValueError(f"warmup must not be negative, got {self.warmup}")
         return self
-
-
-class DesignSection(Section):
-    """``[design]``: the Latin hypercube of simulator runs."""
-
-    runs: int = field_doc("Number of runs R (at least parameters + 2).", 30, default=30, ge=2)
-    seed: int | None = field_doc(
-        "Seed; derived from [study].seed if omitted.", 1, default=None, ge=0
-    )
-    optimization: Literal["none", "random-cd", "lloyd"] = field_doc(
-        "Space-filling optimisation of scipy.stats.qmc.LatinHypercube.", "none", default="random-cd"
-    )
 
 
 class EmulatorSection(Section):
@@ -440,6 +429,11 @@ class Study(Section):
                 f"design.runs: {self.design.runs} runs for {t} "
                 f"{'calibrated ' if self.candidates else ''}parameters; "
                 f"at least {t + 2} are needed"
+            )
+        if self.design.sequential and self.design.run_cap() < self.design.runs:
+            problems.append(
+                f"design.max_runs: {self.design.run_cap()} is below design.runs "
+                f"({self.design.runs}), the first design of the sequential design"
             )
         raise_problems(problems)
         return self

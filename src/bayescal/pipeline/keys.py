@@ -137,9 +137,18 @@ def keys_and_inputs(ctx: Context) -> tuple[dict[str, str], dict[str, dict[str, s
 
     design: list[Item] = [
         ("parameters", dump["parameters"], True),
-        ("design", dump["design"], True),
+        ("design", s.design.key_dump(), True),
         ("study.seed", s.study.seed, False),
     ]
+    if s.design.sequential:  # the batches follow the runs, the emulator and the posterior
+        design += [
+            ("simulator", simulator_fingerprint(ctx.simulator), False),
+            ("boundary conditions", forcing_fingerprint(ctx.measured.forcing), False),
+            ("measured data and periods", _measured_key(ctx), False),
+            ("outputs", s.outputs.calibration_dump(), True),
+            ("emulator", dump["emulator"], True),
+            ("calibration", dump["calibration"], True),
+        ]
     if s.study.prior_from is not None:  # the previous posterior's density, not only its path
         specs = {n: p.spec() for n, p in ctx.priors.items()}
         design.append(("study.prior_from (the previous posterior)", specs, False))

@@ -284,7 +284,12 @@ def _design(r: _Runner) -> Design:
     if ok:
         return found
     start = time.perf_counter()
-    design = make_design(r.ctx)
+    if r.ctx.study.design.sequential:
+        from bayescal.pipeline.seqdesign import sequential_design
+
+        design, _ = sequential_design(r.ctx, r.keys["design"], r.say)
+    else:
+        design = make_design(r.ctx)
     design_store.save_design(design, path)
     r.finish("design", [design_store.FILE], start)
     return design

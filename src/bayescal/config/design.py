@@ -1,0 +1,97 @@
+"""The ``[design]`` section: the simulator runs the emulator is trained on.
+
+One-shot (the default): a Latin hypercube of ``runs`` runs over the priors'
+bounds. Sequential (``sequential = true``): that hypercube is the first design,
+then batches of runs are placed at draws of the current posterior where the
+emulator is least sure, until the emulator's error measured on a new batch is
+small against the measurement noise, or ``max_runs`` or ``max_minutes`` is
+reached (:mod:`bayescal.pipeline.seqdesign`, docs/method.md section
+"Sequential design").
+"""
+
+from __future__ import annotations
+
+from typing import Any, Literal
+
+from bayescal.config.base import Section, field_doc
+
+__all__ = ["DesignSection"]
+
+#: The sequential keys, left out of the design stage's key while ``sequential`` is
+#: off (so that a one-shot study keeps the key it always had).
+SEQUENTIAL_KEYS = ("sequential", "batch", "max_runs", "tolerance", "max_minutes")
+
+
+class DesignSection(Section):
+    """``[design]``: the Latin hypercube of simulator runs, one-shot or sequential."""
+
+    runs: int = field_doc(
+        "Number of runs R of the Latin hypercube (at least parameters + 2); with "
+        "sequential = true, the size of the first design.",
+        30,
+        default=30,
+        ge=2,
+    )
+    seed: int | None = field_doc(
+        "Seed; derived from [study].seed if omitted.", 1, default=None, ge=0
+    )
+    optimization: Literal["none", "random-cd", "lloyd"] = field_doc(
+        "Space-filling optimisation of scipy.stats.qmc.LatinHypercube.", "none", default="random-cd"
+    )
+    sequential: bool = field_doc(
+        "Grow the design in batches placed where the current posterior puts its mass and "
+        "the emulator is least sure, instead of spreading every run over the prior box "
+        "(docs/method.md, 'Sequential design'). Each batch refits the emulator and a short "
+        "calibration; the runs are cached, and a killed design resumes after its last "
+        "finished batch.",
+        True,
+        default=False,
+    )
+    batch: int | None = field_doc(
+        "sequential: runs per batch (default: twice the number of calibrated parameters, "
+        "at least 4). A batch runs in parallel on the [runner] backend.",
+        8,
+        default=None,
+        ge=1,
+    )
+    max_runs: int | None = field_doc(
+        "sequential: at most this many runs in all, the first design included (default: "
+        "three times runs).",
+        90,
+        default=None,
+        ge=2,
+    )
+    tolerance: float = field_doc(
+        "sequential: the design stops when, for every calibrated output, the emulator's "
+        "root mean squared error on the newest batch (run at posterior draws, predicted "
+        "before the batch joined the emulator's runs) is at most this fraction of the "
+        "output's posterior noise standard deviation. 0.3 means the emulator's error adds "
+        "at most about 9 % to the noise variance. [-]",
+        0.3,
+        default=0.3,
+        gt=0,
+    )
+    max_minutes: float | None = field_doc(
+        "sequential: start no new batch after this many minutes of design (the runs "
+        "already made are kept). [min]",
+        20,
+        default=None,
+        gt=0,
+    )
+
+    def key_dump(self) -> dict[str, Any]:
+        """The section as the design stage's key sees it (without the sequential keys
+        while sequential is off)."""
+        dump = self.model_dump(mode="json")
+        if not self.sequential:
+            for name in SEQUENTIAL_KEYS:
+                dump.pop(name, None)
+        return dump
+
+    def batch_size(self, parameters: int) -> int:
+        """Runs per batch for ``parameters`` calibrated parameters."""
+        return self.batch if self.batch is not None else max(4, 2 * parameters)
+
+    def run_cap(self) -> int:
+        """The most runs of a sequential design, the first design included."""
+        return self.max_runs if self.max_runs is not None else 3 * self.runs

@@ -1,0 +1,439 @@
+"""Sequential design: grow the runs where the posterior lies until the emulator is good enough.
+
+``[design] sequential = true`` replaces the one-shot Latin hypercube of the
+design stage by a loop (docs/method.md, "Sequential design"; anchors: Damblin
+et al. 2018, Sürer, Plumlee and Wild 2024):
+
+1. a first Latin hypercube of ``[design] runs`` runs over the priors' bounds;
+2. the runs are simulated (cached per run, in parallel on the study's backend),
+   the emulator is trained on every run so far and a short calibration
+   (``[calibration]`` chains, at most 300 + 300 sweeps, no extension) gives the
+   current posterior;
+3. a batch of ``[design] batch`` runs is chosen among the current posterior's
+   draws: the half where the emulator's predictive variance (on the training
+   periods, without the out-of-basis part that more runs cannot reduce) is
+   largest, spread by a greedy maximin in the posterior's own scale (each
+   parameter divided by its posterior SD), away from each other and from the
+   runs already made. Before the batch joins the runs, the current emulator's
+   mean predictions at its points are kept;
+4. the batch is simulated, and the emulator's **measured** error on it (root
+   mean squared difference between those predictions and the runs, over the
+   training periods) is compared with each output's posterior noise SD; the
+   design stops when the ratio is at most ``[design] tolerance`` for every
+   calibrated output, or at ``max_runs`` runs, or once ``max_minutes`` have
+   passed. Otherwise back to 2.
+
+The final design (every run made, failed ones included: the simulate stage
+drops them as it always does) is the design stage's result; the later stages
+train the emulator and calibrate on it with the study's full settings.
+
+The loop's state is written atomically to ``OUTPUT_DIR/sequential/state.npz``
+after each batch is chosen: a killed design resumes with the batch it was
+running (its finished runs come from the run cache), and never chooses a batch
+twice. ``OUTPUT_DIR/sequential/history.csv`` holds, per step, the runs so far,
+the measured emulator error per output and the posterior's mean and SD per
+parameter: the runs-to-posterior curve.
+"""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+import io
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from bayescal.atomic import atomic_write_npz, atomic_write_text, read_npz
+from bayescal.calibration.posterior import Posterior
+from bayescal.design import Design, latin_hypercube
+from bayescal.errors import ConfigError, DataError
+from bayescal.pipeline.stages import (
+    Context,
+    EmulatorResult,
+    build_emulator,
+    calibrate_stage,
+    simulate,
+)
+from bayescal.runner import RunResults
+
+__all__ = [
+    "HISTORY_FILE",
+    "STATE_FILE",
+    "Step",
+    "choose_batch",
+    "emulator_error",
+    "sequential_design",
+]
+
+Say = Callable[[str], None]
+STATE_FILE = Path("sequential") / "state.npz"
+HISTORY_FILE = Path("sequential") / "history.csv"
+#: Sweeps of the short calibrations inside the loop (burn-in and kept, per chain).
+QUICK_SWEEPS = 300
+#: Candidate posterior draws scored for a batch.
+CANDIDATES = 400
+
+
+@dataclass(frozen=True)
+class Step:
+    """One pass of the loop: the runs it saw and what it measured.
+
+    Attributes
+    ----------
+    runs
+        Design rows so far (failed runs included).
+    succeeded
+        Runs that succeeded among them.
+    error_ratio
+        Output -> the previous emulator's RMSE on the newest batch divided by the
+        output's posterior noise SD (NaN for the first design: no batch yet).
+    mean, sd
+        Posterior mean and SD of each calibrated parameter (physical units) from
+        the short calibration on these runs (NaN where the loop stopped before it).
+    """
+
+    runs: int
+    succeeded: int
+    error_ratio: dict[str, float]
+    mean: dict[str, float]
+    sd: dict[str, float]
+
+
+def _quick(ctx: Context) -> Context:
+    """The context with a short, unextended calibration for the loop."""
+    cal = ctx.study.calibration
+    quick = cal.model_copy(
+        update={
+            "burn": min(cal.burn, QUICK_SWEEPS),
+            "samples": min(cal.samples, QUICK_SWEEPS),
+            "max_samples": min(cal.samples, QUICK_SWEEPS),
+        }
+    )
+    return dataclasses.replace(ctx, study=ctx.study.model_copy(update={"calibration": quick}))
+
+
+def _noise_sd(post: Posterior, em: EmulatorResult, ctx: Context) -> dict[str, float]:
+    """Each calibrated output's posterior median noise SD (on the emulator's scale)."""
+    found = {name: float(np.median(draws)) for name, draws in post.noise_sd().items()}
+    for name in em.emulator.outputs.names:
+        if name not in found:
+            stated = ctx.study.outputs.noise_sd(name)
+            if stated is None:
+                raise ConfigError(
+                    f"the sequential design needs a noise SD for {name!r}: the calibration "
+                    "gave none and [outputs] states none",
+                    hint="set the output's noise_sd, or design.sequential = false",
+                )
+            found[name] = float(stated)
+    return found
+
+
+def predict_runs(em: EmulatorResult, theta_phys: np.ndarray) -> np.ndarray:
+    """The emulator's mean on the training periods at each parameter set.
+
+    Returns ``(b, N, m*)``: outputs stacked along ``N`` (``outputs.slices``), on the
+    emulator's scale (the outputs' units, or log units for log-transformed outputs).
+    """
+    x = em.emulator.x
+    out = []
+    for theta in np.atleast_2d(theta_phys):
+        mean, _ = em.emulator.predict(theta, x, out_of_basis=False)
+        out.append(mean)
+    return np.asarray(out)
+
+
+def emulator_error(
+    em: EmulatorResult, predicted: np.ndarray, rows: np.ndarray, sims: RunResults
+) -> dict[str, float]:
+    """Root mean squared difference between predictions and runs, per output, in the basis.
+
+    The difference is standardised and projected on the basis of ``em`` before its
+    RMSE is taken: the out-of-basis rest of a run (the truncation of the PCA, which
+    the calibration carries as ``1 / lambda``) does not shrink with more runs.
+
+    Parameters
+    ----------
+    em
+        The emulator trained on every run, the batch's included (it supplies the
+        runs' values on the training periods, on the emulator's scale).
+    predicted
+        ``(b, N, m*)`` predictions made before the batch was run (:func:`predict_runs`).
+    rows
+        Design rows of the batch (in ``sims.design``).
+    sims
+        The runs; a failed batch row is skipped.
+    """
+    asm = em.assembled
+    n_per = asm.x.shape[0]
+    phys = asm.outputs.invert(asm.y_std)  # (N, R_ok m*), run-major
+    sd = asm.outputs.sd[:, None]
+    k = asm.basis.k
+    where = {int(row): i for i, row in enumerate(sims.indices)}
+    sq: dict[str, list[np.ndarray]] = {name: [] for name in asm.outputs.names}
+    for b, row in enumerate(rows):
+        i = where.get(int(row))
+        if i is None:
+            continue
+        diff = (phys[:, i * n_per : (i + 1) * n_per] - predicted[b]) / sd
+        # the part in the basis: the out-of-basis rest does not shrink with more runs
+        inside = k @ np.linalg.lstsq(k, diff, rcond=None)[0] * sd
+        for name, sl in asm.outputs.slices.items():
+            part = inside[sl]
+            sq[name].append(part[np.isfinite(part)] ** 2)
+    return {
+        name: float(np.sqrt(np.mean(np.concatenate(v)))) if v else float("nan")
+        for name, v in sq.items()
+    }
+
+
+def _variance(em: EmulatorResult, unit: np.ndarray) -> np.ndarray:
+    """Mean predictive variance of the standardised output over the training periods,
+    without the out-of-basis part, at each normalised parameter set."""
+    x = em.emulator.x
+    return np.array(
+        [float(np.mean(em.emulator.predict_std(u, x, out_of_basis=False)[1])) for u in unit]
+    )
+
+
+def choose_batch(
+    em: EmulatorResult, post: Posterior, existing: np.ndarray, size: int, seed: int
+) -> np.ndarray:
+    """``size`` normalised parameter sets among the posterior's draws (module docstring).
+
+    Parameters
+    ----------
+    em
+        The current emulator.
+    post
+        The current posterior.
+    existing
+        Normalised rows already in the design, ``(R, t)``.
+    size
+        Runs in the batch.
+    seed
+        Seed of the thinning of the draws.
+    """
+    draws = post.unit_draws.reshape(-1, len(post.names))
+    rng = np.random.default_rng(seed)
+    pick = rng.choice(len(draws), size=min(CANDIDATES, len(draws)), replace=False)
+    cand = np.unique(draws[pick], axis=0)
+    var = _variance(em, cand)
+    keep = var >= np.median(var)
+    cand, var = cand[keep], var[keep]
+    scale = np.maximum(draws.std(axis=0), 1e-9)
+    z_cand = cand / scale
+    z_old = np.asarray(existing, dtype=float) / scale
+    near = (
+        np.min(np.linalg.norm(z_cand[:, None, :] - z_old[None, :, :], axis=2), axis=1)
+        if len(z_old)
+        else np.full(len(cand), np.inf)
+    )
+    chosen: list[int] = [int(np.argmax(var))]
+    while len(chosen) < min(size, len(cand)):
+        last = z_cand[chosen[-1]]
+        near = np.minimum(near, np.linalg.norm(z_cand - last, axis=1))
+        near[chosen] = -np.inf
+        chosen.append(int(np.argmax(near)))
+    return np.asarray(cand[chosen], dtype=float)
+
+
+def _posterior_summary(post: Posterior) -> tuple[dict[str, float], dict[str, float]]:
+    flat = post.draws.reshape(-1, len(post.names))
+    return (
+        {n: float(v) for n, v in zip(post.names, flat.mean(axis=0), strict=True)},
+        {n: float(v) for n, v in zip(post.names, flat.std(axis=0), strict=True)},
+    )
+
+
+@dataclass
+class _State:
+    """What the loop has decided so far (written after each batch is chosen)."""
+
+    key: str
+    unit: np.ndarray  # every row so far, normalised
+    batch_start: int  # first row of the newest batch (== len(unit) before any batch)
+    predicted: np.ndarray  # (b, N, m*) predictions at the newest batch, or empty
+    steps: list[Step]
+    started: float  # seconds of design already spent before this process
+    noise: dict[str, float] = dataclasses.field(default_factory=dict)  # at the newest batch
+
+    def save(self, out: Path, outputs: tuple[str, ...], names: tuple[str, ...]) -> None:
+        atomic_write_npz(
+            out / STATE_FILE,
+            {
+                "key": np.asarray(self.key),
+                "unit": self.unit,
+                "batch_start": np.asarray(self.batch_start),
+                "predicted": self.predicted,
+                "seconds": np.asarray(self.started),
+                "noise_names": np.asarray(list(self.noise), dtype=str),
+                "noise": np.asarray(list(self.noise.values()), dtype=float),
+            },
+        )
+        atomic_write_text(out / HISTORY_FILE, _history_csv(self.steps, outputs, names))
+
+    @classmethod
+    def load(cls, out: Path, key: str) -> _State | None:
+        path = out / STATE_FILE
+        if not path.is_file():
+            return None
+        try:
+            data = read_npz(path)
+            if str(data["key"]) != key:
+                return None
+            steps = _read_history(out / HISTORY_FILE)
+            return cls(
+                key,
+                np.asarray(data["unit"], dtype=float),
+                int(data["batch_start"]),
+                np.asarray(data["predicted"], dtype=float),
+                steps,
+                float(data["seconds"]),
+                {str(n): float(v) for n, v in zip(data["noise_names"], data["noise"], strict=True)},
+            )
+        except (OSError, ValueError, KeyError, DataError):
+            return None
+
+
+def _history_csv(steps: list[Step], outputs: tuple[str, ...], names: tuple[str, ...]) -> str:
+    buf = io.StringIO()
+    writer = csv.writer(buf, lineterminator="\n")
+    writer.writerow(
+        ["runs", "succeeded"]
+        + [f"error_ratio_{o}" for o in outputs]
+        + [f"mean_{n}" for n in names]
+        + [f"sd_{n}" for n in names]
+    )
+    for s in steps:
+        writer.writerow(
+            [s.runs, s.succeeded]
+            + [f"{s.error_ratio.get(o, float('nan')):.6g}" for o in outputs]
+            + [f"{s.mean.get(n, float('nan')):.8g}" for n in names]
+            + [f"{s.sd.get(n, float('nan')):.8g}" for n in names]
+        )
+    return buf.getvalue()
+
+
+def _read_history(path: Path) -> list[Step]:
+    if not path.is_file():
+        return []
+    steps = []
+    with path.open(encoding="utf-8") as f:
+        for row in csv.DictReader(f):
+
+            def pick(prefix: str, row: dict[str, str] = row) -> dict[str, float]:
+                return {k[len(prefix) :]: float(v) for k, v in row.items() if k.startswith(prefix)}
+
+            steps.append(
+                Step(
+                    int(row["runs"]),
+                    int(row["succeeded"]),
+                    pick("error_ratio_"),
+                    pick("mean_"),
+                    pick("sd_"),
+                )
+            )
+    return steps
+
+
+def sequential_design(ctx: Context, key: str, say: Say) -> tuple[Design, list[Step]]:
+    """Grow the design in batches (module docstring); the final design and the steps.
+
+    Parameters
+    ----------
+    ctx
+        The study.
+    key
+        The design stage's key: a saved state with another key is not resumed.
+    say
+        Receives one line per step.
+    """
+    section = ctx.study.design
+    priors = ctx.priors
+    names = tuple(priors)
+    seed = ctx.seed("design", section.seed)
+    cap = section.run_cap()
+    size = section.batch_size(len(names))
+    quick = _quick(ctx)
+    state = _State.load(ctx.out, key)
+    if state is None:
+        first = latin_hypercube(
+            priors, section.runs, seed, None if section.optimization == "none" else "random-cd"
+        )
+        state = _State(key, first.unit, len(first.unit), np.empty((0,)), [], 0.0)
+    else:
+        say(
+            f"design: resuming the sequential design at {len(state.unit)} runs "
+            f"({len(state.steps)} step(s) done)"
+        )
+    clock = time.perf_counter() - state.started
+    outputs = tuple(ctx.study.outputs.calibrate)
+    while True:
+        design = Design(priors, state.unit, seed=seed)
+        sims = simulate(ctx, design)
+        em = build_emulator(quick, sims)
+        ratio: dict[str, float] = {o: float("nan") for o in outputs}
+        batch_rows = np.arange(state.batch_start, len(state.unit))
+        if state.predicted.size and len(batch_rows):
+            noise = state.noise
+            errors = emulator_error(em, state.predicted, batch_rows, sims)
+            ratio = {o: errors[o] / noise[o] for o in outputs}
+        done = bool(state.predicted.size) and all(r <= section.tolerance for r in ratio.values())
+        failed = [f.index for f in sims.failures if f.index >= state.batch_start]
+        if failed and state.steps:
+            say(f"design: {len(failed)} run(s) of the newest batch failed; the design goes on")
+        minutes = (time.perf_counter() - clock) / 60.0
+        over_time = section.max_minutes is not None and minutes >= section.max_minutes
+        full = len(state.unit) >= cap
+        mean: dict[str, float] = {}
+        sd: dict[str, float] = {}
+        post: Posterior | None = None
+        if not (done or full or over_time):
+            post = calibrate_stage(quick, em)
+            mean, sd = _posterior_summary(post)
+        step = Step(len(state.unit), len(sims.indices), ratio, mean, sd)
+        state.steps.append(step)
+        say(_step_line(step, section.tolerance, names))
+        if done or full or over_time or post is None:
+            why = (
+                f"the emulator's error on the newest batch is within {section.tolerance:g} of "
+                "the noise SD for every output"
+                if done
+                else f"max_runs = {cap} reached"
+                if full
+                else f"max_minutes = {section.max_minutes:g} reached"
+            )
+            say(f"design: sequential design stopped at {len(state.unit)} runs ({why})")
+            state.started = time.perf_counter() - clock
+            state.predicted = np.empty((0,))
+            state.batch_start = len(state.unit)
+            state.save(ctx.out, outputs, names)
+            return Design(priors, state.unit, seed=seed), state.steps
+        noise = _noise_sd(post, em, ctx)
+        batch = choose_batch(
+            em, post, state.unit, min(size, cap - len(state.unit)), seed + len(state.steps)
+        )
+        physical = em.assembled.theta_normaliser.invert(batch)
+        state.predicted = predict_runs(em, physical)
+        state.noise = noise
+        state.batch_start = len(state.unit)
+        state.unit = np.vstack([state.unit, batch])
+        state.started = time.perf_counter() - clock
+        state.save(ctx.out, outputs, names)
+
+
+def _step_line(step: Step, tolerance: float, names: tuple[str, ...]) -> str:
+    errors = [f"{o} {r:.2f}" for o, r in step.error_ratio.items() if np.isfinite(r)]
+    text = f"design: {step.runs} runs ({step.succeeded} succeeded)"
+    if errors:
+        text += f"; emulator error on the newest batch / noise SD: {', '.join(errors)} "
+        text += f"(stops at {tolerance:g})"
+    if step.mean:
+        text += "; posterior " + ", ".join(
+            f"{n} {step.mean[n]:.4g} ± {step.sd[n]:.2g}" for n in names
+        )
+    return text
