@@ -64,8 +64,11 @@ __all__ = [
     "HISTORY_FILE",
     "STATE_FILE",
     "Step",
+    "batch_differences",
     "choose_batch",
-    "emulator_error",
+    "error_ratios",
+    "posterior_shift",
+    "predict_runs",
     "sequential_design",
 ]
 
@@ -91,6 +94,9 @@ class Step:
     error_ratio
         Output -> the previous emulator's RMSE on the newest batch divided by the
         output's posterior noise SD (NaN for the first design: no batch yet).
+    shift
+        How far that error would move the posterior mean, in posterior SDs
+        (:func:`posterior_shift`; NaN for the first design).
     mean, sd
         Posterior mean and SD of each calibrated parameter (physical units) from
         the short calibration on these runs (NaN where the loop stopped before it).
@@ -101,6 +107,7 @@ class Step:
     error_ratio: dict[str, float]
     mean: dict[str, float]
     sd: dict[str, float]
+    shift: float = float("nan")
 
 
 def _quick(ctx: Context) -> Context:
@@ -128,7 +135,7 @@ def _noise_sd(post: Posterior, em: EmulatorResult, ctx: Context) -> dict[str, fl
                     "gave none and [outputs] states none",
                     hint="set the output's noise_sd, or design.sequential = false",
                 )
-            found[name] = float(stated)
+            found[name] = float(min(stated)) if isinstance(stated, tuple) else float(stated)
     return found
 
 
@@ -146,26 +153,30 @@ def predict_runs(em: EmulatorResult, theta_phys: np.ndarray) -> np.ndarray:
     return np.asarray(out)
 
 
-def emulator_error(
+def batch_differences(
     em: EmulatorResult, predicted: np.ndarray, rows: np.ndarray, sims: RunResults
-) -> dict[str, float]:
-    """Root mean squared difference between predictions and runs, per output, in the basis.
+) -> np.ndarray:
+    """Runs minus the predictions made before they were run, in the basis.
 
-    The difference is standardised and projected on the basis of ``em`` before its
-    RMSE is taken: the out-of-basis rest of a run (the truncation of the PCA, which
-    the calibration carries as ``1 / lambda``) does not shrink with more runs.
+    The difference is standardised and projected on the basis of ``em`` (the
+    emulator trained on every run, the batch's included): the out-of-basis rest of
+    a run (the truncation of the PCA, which the calibration carries as
+    ``1 / lambda``) does not shrink with more runs.
 
     Parameters
     ----------
     em
-        The emulator trained on every run, the batch's included (it supplies the
-        runs' values on the training periods, on the emulator's scale).
+        The emulator trained on every run, the batch's included.
     predicted
         ``(b, N, m*)`` predictions made before the batch was run (:func:`predict_runs`).
     rows
         Design rows of the batch (in ``sims.design``).
     sims
         The runs; a failed batch row is skipped.
+
+    Returns
+    -------
+    ``(b_ok, N, m*)`` on the emulator's scale (the outputs' units, or log units).
     """
     asm = em.assembled
     n_per = asm.x.shape[0]
@@ -173,21 +184,62 @@ def emulator_error(
     sd = asm.outputs.sd[:, None]
     k = asm.basis.k
     where = {int(row): i for i, row in enumerate(sims.indices)}
-    sq: dict[str, list[np.ndarray]] = {name: [] for name in asm.outputs.names}
+    out = []
     for b, row in enumerate(rows):
         i = where.get(int(row))
         if i is None:
             continue
-        diff = (phys[:, i * n_per : (i + 1) * n_per] - predicted[b]) / sd
-        # the part in the basis: the out-of-basis rest does not shrink with more runs
-        inside = k @ np.linalg.lstsq(k, diff, rcond=None)[0] * sd
-        for name, sl in asm.outputs.slices.items():
-            part = inside[sl]
-            sq[name].append(part[np.isfinite(part)] ** 2)
+        diff = np.nan_to_num((phys[:, i * n_per : (i + 1) * n_per] - predicted[b]) / sd)
+        out.append(k @ np.linalg.lstsq(k, diff, rcond=None)[0] * sd)
+    return np.asarray(out).reshape(len(out), *predicted.shape[1:])
+
+
+def error_ratios(
+    em: EmulatorResult, diffs: np.ndarray, noise: dict[str, float]
+) -> dict[str, float]:
+    """Each output's RMS of :func:`batch_differences` over its noise SD."""
     return {
-        name: float(np.sqrt(np.mean(np.concatenate(v)))) if v else float("nan")
-        for name, v in sq.items()
+        name: float(np.sqrt(np.mean(diffs[:, sl] ** 2)) / noise[name]) if len(diffs) else np.nan
+        for name, sl in em.assembled.outputs.slices.items()
     }
+
+
+def posterior_shift(
+    em: EmulatorResult,
+    diffs: np.ndarray,
+    noise: dict[str, float],
+    mean: dict[str, float],
+    sd: dict[str, float],
+) -> float:
+    """How far the emulator's measured error would move the posterior mean, in posterior SDs.
+
+    With white noise of SD sigma and the model locally linear in theta, an
+    error ``e`` of the emulator's mean shifts the least-squares (and, where the
+    data dominate the prior, the posterior) mean by ``(J'J)^-1 J' e``, whose
+    Mahalanobis length in the posterior's covariance ``sigma^2 (J'J)^-1`` is
+    ``|P_J e| / sigma``: the length of the error's projection on the span of
+    the outputs' sensitivities ``J = d eta / d theta``. ``J`` is the emulator's,
+    by central differences of half a posterior SD around the posterior mean,
+    over the training periods. Returns the root mean square over the batch
+    (NaN for an empty batch). AR(1) errors or a discrepancy make it an
+    approximation.
+    """
+    if not len(diffs):
+        return float("nan")
+    names = em.emulator.parameter_names
+    scale = np.empty(diffs.shape[1])
+    for name, sl in em.assembled.outputs.slices.items():
+        scale[sl] = noise[name]
+    center = np.array([mean[n] for n in names])
+    cols = []
+    for j, name in enumerate(names):
+        h = np.zeros_like(center)
+        h[j] = 0.5 * max(sd[name], 1e-12)
+        up, down = predict_runs(em, np.vstack([center + h, center - h]))
+        cols.append(((up - down) / scale[:, None]).ravel() / (2 * h[j]))
+    q, _ = np.linalg.qr(np.column_stack(cols))
+    e = (diffs / scale[None, :, None]).reshape(len(diffs), -1)
+    return float(np.sqrt(np.mean(np.sum((e @ q) ** 2, axis=1))))
 
 
 def _variance(em: EmulatorResult, unit: np.ndarray) -> np.ndarray:
@@ -304,6 +356,7 @@ def _history_csv(steps: list[Step], outputs: tuple[str, ...], names: tuple[str, 
     writer = csv.writer(buf, lineterminator="\n")
     writer.writerow(
         ["runs", "succeeded"]
+        + ["shift"]
         + [f"error_ratio_{o}" for o in outputs]
         + [f"mean_{n}" for n in names]
         + [f"sd_{n}" for n in names]
@@ -311,6 +364,7 @@ def _history_csv(steps: list[Step], outputs: tuple[str, ...], names: tuple[str, 
     for s in steps:
         writer.writerow(
             [s.runs, s.succeeded]
+            + [f"{s.shift:.6g}"]
             + [f"{s.error_ratio.get(o, float('nan')):.6g}" for o in outputs]
             + [f"{s.mean.get(n, float('nan')):.8g}" for n in names]
             + [f"{s.sd.get(n, float('nan')):.8g}" for n in names]
@@ -335,6 +389,7 @@ def _read_history(path: Path) -> list[Step]:
                     pick("error_ratio_"),
                     pick("mean_"),
                     pick("sd_"),
+                    float(row["shift"]),
                 )
             )
     return steps
@@ -377,12 +432,14 @@ def sequential_design(ctx: Context, key: str, say: Say) -> tuple[Design, list[St
         sims = simulate(ctx, design)
         em = build_emulator(quick, sims)
         ratio: dict[str, float] = {o: float("nan") for o in outputs}
+        shift = float("nan")
         batch_rows = np.arange(state.batch_start, len(state.unit))
-        if state.predicted.size and len(batch_rows):
-            noise = state.noise
-            errors = emulator_error(em, state.predicted, batch_rows, sims)
-            ratio = {o: errors[o] / noise[o] for o in outputs}
-        done = bool(state.predicted.size) and all(r <= section.tolerance for r in ratio.values())
+        if state.predicted.size and len(batch_rows) and state.steps:
+            diffs = batch_differences(em, state.predicted, batch_rows, sims)
+            ratio = error_ratios(em, diffs, state.noise)
+            last = state.steps[-1]
+            shift = posterior_shift(em, diffs, state.noise, last.mean, last.sd)
+        done = bool(np.isfinite(shift)) and shift <= section.tolerance
         failed = [f.index for f in sims.failures if f.index >= state.batch_start]
         if failed and state.steps:
             say(f"design: {len(failed)} run(s) of the newest batch failed; the design goes on")
@@ -395,13 +452,13 @@ def sequential_design(ctx: Context, key: str, say: Say) -> tuple[Design, list[St
         if not (done or full or over_time):
             post = calibrate_stage(quick, em)
             mean, sd = _posterior_summary(post)
-        step = Step(len(state.unit), len(sims.indices), ratio, mean, sd)
+        step = Step(len(state.unit), len(sims.indices), ratio, mean, sd, shift)
         state.steps.append(step)
         say(_step_line(step, section.tolerance, names))
         if done or full or over_time or post is None:
             why = (
-                f"the emulator's error on the newest batch is within {section.tolerance:g} of "
-                "the noise SD for every output"
+                f"the emulator's error on the newest batch would move the posterior mean by "
+                f"{shift:.2g} posterior SD, within tolerance = {section.tolerance:g}"
                 if done
                 else f"max_runs = {cap} reached"
                 if full
@@ -427,11 +484,13 @@ def sequential_design(ctx: Context, key: str, say: Say) -> tuple[Design, list[St
 
 
 def _step_line(step: Step, tolerance: float, names: tuple[str, ...]) -> str:
-    errors = [f"{o} {r:.2f}" for o, r in step.error_ratio.items() if np.isfinite(r)]
     text = f"design: {step.runs} runs ({step.succeeded} succeeded)"
-    if errors:
-        text += f"; emulator error on the newest batch / noise SD: {', '.join(errors)} "
-        text += f"(stops at {tolerance:g})"
+    if np.isfinite(step.shift):
+        errors = [f"{o} {r:.2f}" for o, r in step.error_ratio.items() if np.isfinite(r)]
+        text += (
+            f"; the emulator's error on the newest batch ({', '.join(errors)} x noise SD) "
+            f"would move the posterior mean {step.shift:.2f} SD (stops at {tolerance:g})"
+        )
     if step.mean:
         text += "; posterior " + ", ".join(
             f"{n} {step.mean[n]:.4g} ± {step.sd[n]:.2g}" for n in names
