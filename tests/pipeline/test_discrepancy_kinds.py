@@ -52,8 +52,8 @@ def test_true_is_kept_as_written(tmp_path: Path) -> None:
 
 
 def test_the_free_float_example_declares_the_conditions_only(tmp_path: Path) -> None:
-    # chosen on its training days (docs/case-studies.md): "both" was not clearly better
-    # on the data made with EnergyPlus at 60 steps per hour
+    # chosen on its training days (docs/validation/case-studies-log.md): "both" was not
+    # clearly better on the data made with EnergyPlus at 60 steps per hour
     study = load_study(copy_example("box-freefloat", tmp_path / "ff"))
     assert study.outputs.calibration_dump()["errors"]["temp_air_in"]["discrepancy"] is True
 

@@ -8,7 +8,7 @@ correlated across updates: on the box examples a chain needs tens of updates
 per effective draw, and four chains of Metropolis-within-Gibbs on the raw
 parameters (strongly correlated: the heat-loss coefficient, the capacity and
 the solar gains trade off) reached R-hat 1.36 (co-heating) and 1.65
-(free-float) after 4 x 30 000 sweeps (docs/benchmarks.md). Two things help:
+(free-float) after 4 x 30 000 sweeps (docs/validation/benchmarks-log.md). Two things help:
 cheap sweeps, so that many updates fit in the time, and proposals that fit
 the posterior's shape, so that a chain reaches each new target within a few
 sweeps. A parameter piled up at a bound (the box's r_ag) still mixes slowly:

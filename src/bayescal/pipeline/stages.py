@@ -525,7 +525,7 @@ def _band(
     # it: Delta was estimated against the emulator on the training periods, where
     # the emulator reproduces the simulator (leave-one-run-out CV), but outside
     # their conditions only the simulator is trustworthy (Twin House test week:
-    # emulator + Delta RMSE 2.25 W/m², simulator + Delta see docs/case-studies.md).
+    # emulator + Delta RMSE 2.25 W/m², simulator + Delta see docs/validation/case-studies-log.md).
     transforms = ctx.transforms
     if section.method == "simulator":
         runs, lam_star, drawn = posterior_runs(ctx, posterior, section.runs)

@@ -26,7 +26,7 @@ covariance and the scale ``g`` from these joint moves
 coordinates are correlated this mixes far better per evaluation: on the Twin
 House calibration (seven coordinates, correlations up to 0.86) the smallest
 bulk ESS per log-density evaluation after burn-in was 7-8x the Gibbs sweeps'
-(docs/benchmarks.md).
+(docs/validation/benchmarks-log.md).
 
 Bounded coordinates are sampled on a transformed scale or reflected at the
 bounds (see :mod:`bayescal.mcmc.samplers.base`); ``fixed`` coordinates
