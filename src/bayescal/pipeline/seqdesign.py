@@ -70,6 +70,7 @@ __all__ = [
     "posterior_shift",
     "predict_runs",
     "sequential_design",
+    "shift_length",
 ]
 
 Say = Callable[[str], None]
@@ -79,6 +80,9 @@ HISTORY_FILE = Path("sequential") / "history.csv"
 QUICK_SWEEPS = 300
 #: Candidate posterior draws scored for a batch.
 CANDIDATES = 400
+#: Batches in a row without a new smallest shift after which the design stops: the
+#: emulator's error has reached its floor (the GP's nugget), more runs do not help.
+PATIENCE = 3
 
 
 @dataclass(frozen=True)
@@ -237,8 +241,23 @@ def posterior_shift(
         h[j] = 0.5 * max(sd[name], 1e-12)
         up, down = predict_runs(em, np.vstack([center + h, center - h]))
         cols.append(((up - down) / scale[:, None]).ravel() / (2 * h[j]))
-    q, _ = np.linalg.qr(np.column_stack(cols))
-    e = (diffs / scale[None, :, None]).reshape(len(diffs), -1)
+    errors = (diffs / scale[None, :, None]).reshape(len(diffs), -1)
+    return shift_length(np.column_stack(cols), errors)
+
+
+def shift_length(sensitivity: np.ndarray, errors: np.ndarray) -> float:
+    """Root mean square over rows of ``|P_J e|``: the Mahalanobis length of the shift.
+
+    Parameters
+    ----------
+    sensitivity
+        ``J`` ``(n, t)``: the outputs' derivatives in the parameters, each row
+        divided by its noise SD.
+    errors
+        ``(b, n)``: one error vector per row, divided by the noise SD likewise.
+    """
+    q, _ = np.linalg.qr(np.asarray(sensitivity, dtype=float))
+    e = np.atleast_2d(np.asarray(errors, dtype=float))
     return float(np.sqrt(np.mean(np.sum((e @ q) ** 2, axis=1))))
 
 
@@ -446,16 +465,20 @@ def sequential_design(ctx: Context, key: str, say: Say) -> tuple[Design, list[St
         minutes = (time.perf_counter() - clock) / 60.0
         over_time = section.max_minutes is not None and minutes >= section.max_minutes
         full = len(state.unit) >= cap
+        shifts = [st.shift for st in state.steps if np.isfinite(st.shift)]
+        if np.isfinite(shift):
+            shifts.append(shift)
+        stalled = len(shifts) > PATIENCE and min(shifts[-PATIENCE:]) >= min(shifts[:-PATIENCE])
         mean: dict[str, float] = {}
         sd: dict[str, float] = {}
         post: Posterior | None = None
-        if not (done or full or over_time):
+        if not (done or full or over_time or stalled):
             post = calibrate_stage(quick, em)
             mean, sd = _posterior_summary(post)
         step = Step(len(state.unit), len(sims.indices), ratio, mean, sd, shift)
         state.steps.append(step)
         say(_step_line(step, section.tolerance, names))
-        if done or full or over_time or post is None:
+        if done or full or over_time or stalled or post is None:
             why = (
                 f"the emulator's error on the newest batch would move the posterior mean by "
                 f"{shift:.2g} posterior SD, within tolerance = {section.tolerance:g}"
@@ -463,6 +486,9 @@ def sequential_design(ctx: Context, key: str, say: Say) -> tuple[Design, list[St
                 else f"max_runs = {cap} reached"
                 if full
                 else f"max_minutes = {section.max_minutes:g} reached"
+                if over_time
+                else f"the shift has not fallen below {min(shifts):.2g} in {PATIENCE} batches: "
+                "the emulator's error is at its floor, more runs do not reduce it"
             )
             say(f"design: sequential design stopped at {len(state.unit)} runs ({why})")
             state.started = time.perf_counter() - clock
