@@ -92,7 +92,7 @@ class Step:
     Attributes
     ----------
     runs
-        Design rows so far (failed runs included).
+        Design rows of this step (its failed runs included; they are dropped after it).
     succeeded
         Runs that succeeded among them.
     error_ratio
@@ -459,9 +459,15 @@ def sequential_design(ctx: Context, key: str, say: Say) -> tuple[Design, list[St
             last = state.steps[-1]
             shift = posterior_shift(em, diffs, state.noise, last.mean, last.sd)
         done = bool(np.isfinite(shift)) and shift <= section.tolerance
-        failed = [f.index for f in sims.failures if f.index >= state.batch_start]
-        if failed and state.steps:
-            say(f"design: {len(failed)} run(s) of the newest batch failed; the design goes on")
+        failed = [f.index for f in sims.failures]
+        if failed:  # dropped: the runner would try them again at every step
+            say(
+                f"design: {len(failed)} run(s) failed and are dropped from the design (their "
+                f"errors in {ctx.out / 'simulations' / 'failures'}); the design goes on"
+            )
+            keep = np.setdiff1d(np.arange(len(state.unit)), failed)
+            state.unit = state.unit[keep]
+            state.batch_start -= int(np.sum(np.asarray(failed) < state.batch_start))
         minutes = (time.perf_counter() - clock) / 60.0
         over_time = section.max_minutes is not None and minutes >= section.max_minutes
         full = len(state.unit) >= cap
@@ -475,7 +481,7 @@ def sequential_design(ctx: Context, key: str, say: Say) -> tuple[Design, list[St
         if not (done or full or over_time or stalled):
             post = calibrate_stage(quick, em)
             mean, sd = _posterior_summary(post)
-        step = Step(len(state.unit), len(sims.indices), ratio, mean, sd, shift)
+        step = Step(design.runs, len(sims.indices), ratio, mean, sd, shift)
         state.steps.append(step)
         say(_step_line(step, section.tolerance, names))
         if done or full or over_time or stalled or post is None:
