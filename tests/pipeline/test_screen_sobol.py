@@ -52,7 +52,8 @@ def test_sobol_proposes_what_morris_proposes(tmp_path: Path) -> None:
                        "bootstrap = 100\nthreshold = 0.05\n")  # fmt: skip
     res = screen(load_study(sobol_dir), options=SERIAL)
     assert res.method == "sobol"
-    assert res.design.runs == 30 and res.runs.n_failed == 0
+    assert res.design.runs == 30
+    assert res.runs.n_failed == 0
     folder = sobol_dir / "out" / "screening"
     for name in ("screening.html", "sobol.csv", "proposal.json", "design.csv"):
         assert (folder / name).is_file(), name
@@ -66,9 +67,11 @@ def test_sobol_proposes_what_morris_proposes(tmp_path: Path) -> None:
     assert table.set_index("parameter").loc["d_fb", "normalised"] < 0.05
     assert "d_fb" not in res.proposal.selected
     document = json.loads((folder / "proposal.json").read_text(encoding="utf-8"))
-    assert document["method"] == "sobol" and document["measure"] == "ST"
+    assert document["method"] == "sobol"
+    assert document["measure"] == "ST"
     page = (folder / "screening.html").read_text(encoding="utf-8")
-    assert page.count("data:image/png;base64,") == 1 and "Sobol" in page
+    assert page.count("data:image/png;base64,") == 1
+    assert "Sobol" in page
     # Morris on the same study proposes the same parameters, most influential first
     morris_dir = _study(tmp_path, "trajectories = 4\nbootstrap = 100\nthreshold = 0.05\n", "m")
     morris = screen(load_study(morris_dir), options=SERIAL)
