@@ -84,7 +84,9 @@ class ScreeningSection(Section):
     )
     threshold: float = field_doc(
         "A parameter is proposed for calibration when its mu* (Morris) or total Sobol "
-        "index ST (Sobol) reaches this fraction of the largest for at least one output. [-]",
+        "index ST (Sobol) reaches this fraction of the largest for at least one output. ST "
+        "is a share of variance, which goes as the square of an effect: 0.01 with Sobol "
+        "keeps about what 0.1 keeps with Morris. [-]",
         0.1,
         default=0.1,
         gt=0,
