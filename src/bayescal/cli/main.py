@@ -544,12 +544,15 @@ def screen(
     scheduler: str | None,
     quiet: bool,
 ) -> None:
-    """Rank the parameters by Morris elementary effects and propose those to calibrate.
+    """Rank the parameters by Morris or Sobol indices and propose those to calibrate.
 
     Screens every [parameters.<name>] (candidates with screen = true and the
-    calibrated ones) on each calibrated output over the training periods;
-    writes OUTPUT_DIR/screening/ (screening.html, morris.csv, proposal.json).
-    Runs are cached with the design's, so a second screen reuses them.
+    calibrated ones) on each calibrated output over the training periods, by
+    Morris elementary effects or, with [screening] method = "sobol", by the
+    Sobol indices of a GP fitted to a Latin hypercube of runs; writes
+    OUTPUT_DIR/screening/ (screening.html, morris.csv or sobol.csv,
+    proposal.json). Runs are cached with the design's, so a second screen
+    reuses them.
     """
     from bayescal.cli.progress import progress_options, screening_text
     from bayescal.config import load_study

@@ -4,7 +4,7 @@
 * :func:`metrics_text` -- the metrics table of ``bayescal simulate``;
 * :func:`describe` -- what ``bayescal run`` and ``bayescal show`` print;
 * :func:`comparison_text` -- the ranking ``bayescal compare`` prints;
-* :func:`screening_text` -- the Morris ranks and proposal of ``bayescal screen``;
+* :func:`screening_text` -- the Morris or Sobol ranks and proposal of ``bayescal screen``;
 * :func:`progress_options` -- the progress of the simulations and the MCMC
   stages, as :class:`bayescal.pipeline.Options` takes them: tqdm bars on a
   terminal, a few plain lines per stage (:class:`LineProgress`) in a log.
@@ -28,7 +28,7 @@ from bayescal.runner import Progress
 
 if TYPE_CHECKING:
     from bayescal.pipeline import Results
-    from bayescal.screening import MorrisIndices, Proposal
+    from bayescal.screening import MorrisIndices, Proposal, SobolIndices
 
 __all__ = [
     "LineProgress",
@@ -530,10 +530,30 @@ def comparison_text(table: Any, notes: Sequence[str], files: Mapping[str, Any]) 
     return "\n".join(lines)
 
 
-def screening_text(indices: Sequence[MorrisIndices], proposal: Proposal) -> str:
-    """The Morris ranks of each output (mu* with its 95 % interval) and the proposal."""
+def screening_text(indices: Sequence[MorrisIndices | SobolIndices], proposal: Proposal) -> str:
+    """The ranks of each output (Morris mu* with its 95 % interval, or Sobol ST and S1 with
+    theirs and the GP's leave-one-out Q2) and the proposal."""
+    from bayescal.screening import Q2_WARN, SobolIndices
+
     lines = []
     for ix in indices:
+        if isinstance(ix, SobolIndices):
+            lines.append(
+                f"{ix.output}: Sobol ST and S1 [95 %] through a GP of {ix.runs} runs "
+                f"(leave-one-out Q2 {ix.q2:.3f})"
+            )
+            low, high = ix.st_lower, ix.st_upper
+            for j in np.argsort(-ix.st, kind="stable"):
+                lines.append(
+                    f"  {int(ix.ranks[j]):3d}  {ix.names[j]:<24s} ST {ix.st[j]:6.3f} "
+                    f"[{low[j]:.3f}, {high[j]:.3f}]  S1 {ix.s1[j]:6.3f}"
+                )
+            if not ix.reliable:
+                lines.append(
+                    f"  warning: Q2 < {Q2_WARN:g}: the ranking is unreliable; raise "
+                    "[screening] runs or use method = 'morris'"
+                )
+            continue
         lines.append(f"{ix.output}: mu* [per prior range] ({ix.trajectories} trajectories)")
         for j in np.argsort(-ix.mu_star, kind="stable"):
             lines.append(
@@ -542,7 +562,7 @@ def screening_text(indices: Sequence[MorrisIndices], proposal: Proposal) -> str:
             )
     cap = "" if proposal.max_parameters is None else f", at most {proposal.max_parameters}"
     lines.append(
-        f"proposed (mu* >= {proposal.threshold:g} × the largest for an output{cap}): "
-        + (", ".join(proposal.selected) or "none")
+        f"proposed ({proposal.measure} >= {proposal.threshold:g} × the largest for an "
+        f"output{cap}): " + (", ".join(proposal.selected) or "none")
     )
     return "\n".join(lines)

@@ -118,20 +118,26 @@ def _out_of_proportion(*keys: tuple[Section, str, str]) -> str:
 
 def screening_need(study: Study, measured: MeasuredData) -> Need:
     """What ``bayescal screen`` needs: ``trajectories x (parameters + 1)`` simulator runs
-    (:mod:`bayescal.pipeline.screen`), cached in ``OUTPUT_DIR/simulations`` like the
-    design's, and the Morris tables of ``OUTPUT_DIR/screening``."""
+    (Morris) or ``runs`` (Sobol's Latin hypercube; :mod:`bayescal.pipeline.screen`),
+    cached in ``OUTPUT_DIR/simulations`` like the design's, and the tables of
+    ``OUTPUT_DIR/screening``."""
     s = study
     k, n = len(s.parameters), int(measured.n)
-    trajectories = int(s.screening.trajectories)
-    runs = trajectories * (k + 1)
     outputs_sim = max(len(s.simulator.output_names()), len(s.outputs.calibrate))
     word = "output" if outputs_sim == 1 else "outputs"
     q = len(s.outputs.calibrate)
+    if s.screening.method == "sobol":
+        runs = s.screening.sobol_runs(k)
+        key, what = "screening.runs", f"{runs} runs (Sobol's Latin hypercube)"
+    else:
+        trajectories = int(s.screening.trajectories)
+        runs = trajectories * (k + 1)
+        key = "screening.trajectories"
+        what = f"{trajectories} trajectories × ({k} parameters + 1) = {runs} runs"
     return Need(
         "screening",
-        "screening.trajectories",
-        f"{trajectories} trajectories × ({k} parameters + 1) = {runs} runs × {n} samples × "
-        f"{outputs_sim} {word}",
+        key,
+        f"{what} × {n} samples × {outputs_sim} {word}",
         2.0 * runs * (outputs_sim * n + 2 * k + q) * _F,  # results, design (unit and values)
         runs * (outputs_sim * n * _F + 4096.0) + 3.0 * runs * (k + q) * _F,  # cache, tables
     )

@@ -1,12 +1,15 @@
-"""``bayescal screen``: Morris screening of a study's parameters before calibration.
+"""``bayescal screen``: Morris or Sobol screening of a study's parameters before calibration.
 
-:func:`screen` draws the Morris trajectories over every parameter of the
+:func:`screen` draws the Morris trajectories (``[screening] method =
+"morris"``) or a Latin hypercube of ``[screening] runs`` runs (``"sobol"``,
+:func:`bayescal.design.latin_hypercube`) over every parameter of the
 study (the candidates marked ``screen = true`` and the calibrated ones, each
 over its prior range), runs them through the same cached, resumable runner
 and backends as the design (:func:`bayescal.runner.run_design`, cache in
 ``OUTPUT_DIR/simulations``), reduces each calibrated output to one scalar
 over the training periods (``[screening] statistic``), computes the Morris
-indices and the proposal (:mod:`bayescal.screening`), and writes
+indices, or the Sobol indices of a GP fitted to the runs, and the proposal
+(:mod:`bayescal.screening`), and writes
 ``OUTPUT_DIR/screening/`` (:mod:`bayescal.store.screening`,
 :mod:`bayescal.report.screening`). ``apply=True`` then marks the proposed
 parameters to be calibrated in the study file
@@ -32,21 +35,24 @@ import numpy as np
 from bayescal.config import Study, build_simulator
 from bayescal.config.edit import set_screen_flags
 from bayescal.data.measured import MeasuredData, load_measured
-from bayescal.design import Design
+from bayescal.design import Design, latin_hypercube
 from bayescal.errors import ConfigError
 from bayescal.pipeline.budget import check_budget, screening_need
 from bayescal.pipeline.keys import derived_seed
 from bayescal.pipeline.run import writing
 from bayescal.pipeline.stages import Options
-from bayescal.report.screening import write_screening_report
+from bayescal.report.screening import write_screening_report, write_sobol_report
 from bayescal.runner import RunResults, run_design
 from bayescal.screening import (
+    Q2_WARN,
     MorrisDesign,
     MorrisIndices,
     Proposal,
+    SobolIndices,
     morris_design,
     morris_indices,
     propose,
+    sobol_indices,
 )
 from bayescal.simulators.base import Simulator
 from bayescal.store import screening as store
@@ -64,14 +70,14 @@ class ScreeningResult:
     Attributes
     ----------
     design
-        The Morris trajectories (normalised).
+        The Morris trajectories (normalised), or the Sobol method's Latin hypercube.
     runs
         The runner's results (successful rows, failures, cached counts).
     statistics
         Output -> the screened scalar of each design row, shape ``(runs,)``, NaN
         where the run failed.
     indices
-        Morris indices, one per calibrated output.
+        Morris or Sobol indices, one per calibrated output.
     proposal
         The parameters proposed for calibration.
     folder
@@ -82,17 +88,20 @@ class ScreeningResult:
         Wall time of the whole screening. [s]
     applied
         Parameters whose ``screen`` flag ``apply`` changed in the study file.
+    method
+        ``"morris"`` or ``"sobol"``.
     """
 
-    design: MorrisDesign
+    design: MorrisDesign | Design
     runs: RunResults
     statistics: dict[str, np.ndarray]
-    indices: tuple[MorrisIndices, ...]
+    indices: tuple[MorrisIndices | SobolIndices, ...]
     proposal: Proposal
     folder: Path
     page: Path
     seconds: float
     applied: tuple[str, ...] = ()
+    method: str = "morris"
 
 
 def screening_statistic(
@@ -146,7 +155,7 @@ def screen(
     apply: bool = False,
     say: Say | None = None,
 ) -> ScreeningResult:
-    """Screen a study's parameters with Morris elementary effects (see the module notes).
+    """Screen a study's parameters by Morris or Sobol indices (see the module notes).
 
     Parameters
     ----------
@@ -164,7 +173,8 @@ def screen(
     ------
     ConfigError
         Fewer than two parameters, SALib missing, fewer than two complete
-        trajectories, or more trajectories than memory or disk allow.
+        trajectories (Morris) or ``k + 2`` runs (Sobol), or more runs than
+        memory or disk allow.
     OutputError
         If the output folder is in use by another ``run`` or ``screen`` (its
         lock), or cannot be written (permission, a full or read-only disk, a
@@ -181,17 +191,31 @@ def screen(
     simulator = build_simulator(study, screening=True)
     priors = study.screening_priors()
     seed = section.seed if section.seed is not None else derived_seed(study.study.seed, "screen")
-    morris = morris_design(list(priors), section.trajectories, section.levels, seed)
-    design = Design(priors, morris.unit, seed=seed)
+    k = len(priors)
+    if section.method == "sobol":
+        if k < 2:
+            raise ConfigError(f"screening needs at least two parameters, got {list(priors)}")
+        size = section.sobol_runs(k)
+        if size < k + 2:
+            raise ConfigError(
+                f"screening.runs = {size} is too few for {k} parameters: the Sobol method's "
+                f"GP needs at least {k + 2} (10 × k = {10 * k} is usual)"
+            )
+        design = latin_hypercube(priors, size, seed)
+        plan = f"a Latin hypercube of {size} runs (Sobol indices through a GP)"
+    else:
+        morris = morris_design(list(priors), section.trajectories, section.levels, seed)
+        design = Design(priors, morris.unit, seed=seed)
+        plan = f"{section.trajectories} Morris trajectories, {morris.runs} runs"
     with writing(out, need.disk), OutputLock(out, command="screen") as lock:
         if lock.took_over:
             note(lock.describe_taken_over())
-        note(
-            f"screen: {len(priors)} parameters ({len(study.candidates)} candidates), "
-            f"{section.trajectories} trajectories, {morris.runs} runs"
-        )
+        note(f"screen: {k} parameters ({len(study.candidates)} candidates), {plan}")
         runs = _run(study, measured, simulator, design, out / "simulations", options)
-        result = _write(study, measured, morris, design, seed, runs, out, start)
+        if section.method == "sobol":
+            result = _write_sobol(study, measured, design, seed, runs, out, start, note)
+        else:
+            result = _write(study, measured, morris, design, seed, runs, out, start)
     if apply:
         flags = {name: name not in result.proposal.selected for name in study.parameters}
         applied = set_screen_flags(study.path, flags)
@@ -207,7 +231,7 @@ def _run(
     cache: Path,
     options: Options,
 ) -> RunResults:
-    """The Morris design's runs, cached with the design's, with the progress bar."""
+    """The screening design's runs, cached with the design's, with the progress bar."""
     factory = options.progress
     progress, close = factory(design.runs) if factory is not None else (None, lambda: None)
     try:
@@ -236,16 +260,11 @@ def _write(
     """The Morris indices of each calibrated output, the proposal and their files."""
     section = study.screening
     samples = _training_samples(measured)
-    statistics, indices = {}, []
-    for k, output in enumerate(study.outputs.calibrate):
-        values = np.full(design.runs, np.nan)
-        values[runs.indices] = screening_statistic(
-            runs.outputs[output], measured.outputs[output], samples, section.statistic
-        )
-        statistics[output] = values
-        indices.append(
-            morris_indices(morris, values, output, bootstrap=section.bootstrap, seed=seed + 1 + k)
-        )
+    statistics = _statistics(study, measured, design, runs, samples)
+    indices = [
+        morris_indices(morris, values, output, bootstrap=section.bootstrap, seed=seed + 1 + k)
+        for k, (output, values) in enumerate(statistics.items())
+    ]
     proposal = propose(indices, section.threshold, section.max_parameters)
     folder = out / store.FOLDER
     facts = {
@@ -283,4 +302,79 @@ def _write(
         folder=folder,
         page=page,
         seconds=time.perf_counter() - start,
+    )
+
+
+def _statistics(
+    study: Study, measured: MeasuredData, design: Design, runs: RunResults, samples: np.ndarray
+) -> dict[str, np.ndarray]:
+    """Output -> the screened scalar of each design row (NaN where the run failed)."""
+    statistics = {}
+    for output in study.outputs.calibrate:
+        values = np.full(design.runs, np.nan)
+        values[runs.indices] = screening_statistic(
+            runs.outputs[output], measured.outputs[output], samples, study.screening.statistic
+        )
+        statistics[output] = values
+    return statistics
+
+
+def _write_sobol(
+    study: Study,
+    measured: MeasuredData,
+    design: Design,
+    seed: int,
+    runs: RunResults,
+    out: Path,
+    start: float,
+    note: Say,
+) -> ScreeningResult:
+    """The GP and Sobol indices of each calibrated output, the proposal and their files."""
+    section = study.screening
+    samples = _training_samples(measured)
+    statistics = _statistics(study, measured, design, runs, samples)
+    indices = []
+    for k, (output, values) in enumerate(statistics.items()):
+        found = sobol_indices(
+            design.unit, values, design.names, output, base=section.saltelli,
+            paths=section.paths, bootstrap=section.bootstrap, seed=seed + 1 + k,
+        )  # fmt: skip
+        if not found.reliable:
+            note(
+                f"screen: the GP of {output}'s {section.statistic} predicts the runs left out "
+                f"with Q2 = {found.q2:.2f} < {Q2_WARN:g}: its Sobol ranking is unreliable; "
+                "raise [screening] runs or use method = 'morris'"
+            )
+        indices.append(found)
+    proposal = propose(indices, section.threshold, section.max_parameters)
+    folder = out / store.FOLDER
+    q2 = ", ".join(f"{ix.output} {ix.q2:.3f}" for ix in indices)
+    facts = {
+        "method": "Sobol indices of a GP fitted to a Latin hypercube",
+        "parameters": f"{len(design.names)} ({len(study.candidates)} candidates)",
+        "runs": f"{design.runs} ({runs.n_cached} from the cache, {runs.n_failed} failed)",
+        "GP leave-one-out Q2": q2,
+        "Saltelli base N × GP paths": f"{section.saltelli} × {section.paths}",
+        "statistic": f"{section.statistic} over {samples.size} training samples",
+        "seconds": f"{time.perf_counter() - start:.1f}",
+    }
+    counts = {"runs": design.runs, "cached": runs.n_cached, "failed": runs.n_failed}
+    store.save_sobol(
+        folder, design, indices, proposal, candidates=study.candidates,
+        statistic=section.statistic, runs=counts,
+    )  # fmt: skip
+    page = write_sobol_report(
+        folder, indices, proposal, study_name=study.study.name, candidates=study.candidates,
+        statistic=section.statistic, facts=facts,
+    )  # fmt: skip
+    return ScreeningResult(
+        design=design,
+        runs=runs,
+        statistics=statistics,
+        indices=tuple(indices),
+        proposal=proposal,
+        folder=folder,
+        page=page,
+        seconds=time.perf_counter() - start,
+        method="sobol",
     )

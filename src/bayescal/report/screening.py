@@ -1,4 +1,4 @@
-"""The screening page: Morris ranks, the mu*-sigma plots, the bar charts and the proposal.
+"""The screening page: Morris or Sobol ranks, their figures and the proposal.
 
 :func:`write_screening_report` writes into the screening folder
 
@@ -9,7 +9,14 @@ In the mu*-sigma plot (Campolongo et al. 2007) a parameter far to the right
 matters; one above the dashed line sigma = mu* acts non-linearly or through
 interactions with others, one well below it about linearly. The bar chart
 shows mu* with its 95 % bootstrap interval and the screening threshold as a
-line. User text (parameter and output names) is escaped.
+line.
+
+:func:`write_sobol_report` writes the same page for ``method = "sobol"``: per
+output, the GP's leave-one-out accuracy (a warning where Q2 is below
+:data:`bayescal.screening.Q2_WARN`), a table of S1 and ST with their 95 %
+intervals (GP paths and Saltelli sample) and ``figures/sobol_<output>.png``,
+the bars of ST and S1 with those intervals and the threshold. User text
+(parameter and output names) is escaped.
 """
 
 from __future__ import annotations
@@ -31,9 +38,16 @@ from bayescal import __version__
 from bayescal.atomic import atomic_write, atomic_write_text
 from bayescal.glossary import GLOSSARY
 from bayescal.report.html import CSS
-from bayescal.screening import MorrisIndices, Proposal
+from bayescal.screening import Q2_WARN, MorrisIndices, Proposal, SobolIndices
 
-__all__ = ["PAGE", "plot_mu_sigma", "plot_mu_star", "write_screening_report"]
+__all__ = [
+    "PAGE",
+    "plot_mu_sigma",
+    "plot_mu_star",
+    "plot_sobol",
+    "write_screening_report",
+    "write_sobol_report",
+]
 
 #: The page, in the screening folder.
 PAGE = "screening.html"
@@ -204,5 +218,121 @@ def write_screening_report(
         f"{html.escape(__version__)}; Morris elementary effects (SALib) of the {statistic} "
         f"of each output over the training periods.</p>{summary}{''.join(sections)}"
         "</body></html>\n"
+    )
+    return atomic_write_text(folder / PAGE, page)
+
+
+def plot_sobol(
+    path: Path, ix: SobolIndices, candidates: Sequence[str], label: str, threshold: float
+) -> Path:
+    """ST (bars) and S1 (dots) of one output with their 95 % intervals, most influential on top."""
+    order = np.argsort(ix.st)
+    y = np.arange(order.size)
+    fig, ax = plt.subplots(figsize=(7.5, 0.28 * len(order) + 1.6))
+    colours = [_CANDIDATE if ix.names[j] in candidates else _CALIBRATED for j in order]
+    st, low, high = ix.st[order], ix.st_lower[order], ix.st_upper[order]
+    ax.barh(y, st, xerr=np.vstack([np.maximum(st - low, 0), np.maximum(high - st, 0)]),
+            color=colours, ecolor="0.3", capsize=2, label="ST (total)")  # fmt: skip
+    s1 = ix.s1[order]
+    s1_err = np.vstack(
+        [np.maximum(s1 - ix.s1_lower[order], 0), np.maximum(ix.s1_upper[order] - s1, 0)]
+    )
+    ax.errorbar(s1, y, xerr=s1_err, fmt="o", color="k", ms=3, lw=0.8, label="S1 (first order)")
+    ax.set_yticks(y, [ix.names[j] for j in order], fontsize=8)
+    cut = threshold * float(max(np.max(ix.st), 0.0))
+    ax.axvline(cut, color="tab:red", lw=0.9, ls="--", label=f"threshold {threshold:g} × max ST")
+    ax.set_xlabel(f"Sobol index of the {label} [-]")
+    ax.set_xlim(left=min(0.0, float(np.min(low))))
+    ax.legend(fontsize=8, loc="lower right")
+    ax.set_title(f"Sobol indices with 95 % intervals: {ix.output} (GP Q2 {ix.q2:.2f})")
+    ax.grid(alpha=0.3, axis="x")
+    fig.tight_layout()
+    target = atomic_write(path, lambda f: fig.savefig(f, format="png", dpi=100))
+    plt.close(fig)
+    return target
+
+
+def _interval(point: float, low: float, high: float) -> str:
+    return f"{_g(point)} [{_g(low)}, {_g(high)}]"
+
+
+def write_sobol_report(
+    folder: Path,
+    indices: Sequence[SobolIndices],
+    proposal: Proposal,
+    *,
+    study_name: str,
+    candidates: Sequence[str],
+    statistic: str,
+    facts: Mapping[str, Any],
+) -> Path:
+    """Write the figures and ``screening.html`` of a Sobol screening; returns the page.
+
+    The parameters are those of :func:`write_screening_report`, with Sobol indices.
+    """
+    figures = folder / "figures"
+    figures.mkdir(parents=True, exist_ok=True)
+    sections = []
+    selected = set(proposal.selected)
+    for ix in indices:
+        unit = _unit(ix.output)
+        label = f"{statistic} of {ix.output}"
+        bars = plot_sobol(
+            figures / f"sobol_{_slug(ix.output)}.png", ix, candidates, label, proposal.threshold
+        )
+        s1_low, s1_high, st_low, st_high = ix.s1_lower, ix.s1_upper, ix.st_lower, ix.st_upper
+        rows = [
+            [
+                int(ix.ranks[j]),
+                ix.names[j],
+                "candidate" if ix.names[j] in candidates else "calibrated",
+                _interval(ix.s1[j], s1_low[j], s1_high[j]),
+                _interval(ix.st[j], st_low[j], st_high[j]),
+                f"{ix.normalised[j]:.3f}",
+                _g(ix.lengths[j]),
+                "yes" if ix.names[j] in selected else "",
+            ]
+            for j in np.argsort(-ix.st, kind="stable")
+        ]
+        header = ["rank", "parameter", "role", "S1 [95 %]", "ST [95 %]", "ST/max",
+                  "GP length scale", "proposed"]  # fmt: skip
+        sd = _g(ix.sd) + (f" {unit}" if unit else "")
+        accuracy = (
+            f"GP fitted to {ix.runs} runs: leave-one-out Q2 {ix.q2:.3f}, RMSE "
+            f"{_g(ix.loo_rmse)} against the statistic's SD {sd} over the runs."
+        )
+        warning = (
+            ""
+            if ix.reliable
+            else f"<p><strong>Warning:</strong> Q2 is below {Q2_WARN:g}: the GP does not "
+            "predict the runs it leaves out well, so this ranking is unreliable. Raise "
+            '<code>[screening] runs</code> or use <code>method = "morris"</code>.</p>'
+        )
+        sections.append(
+            f"<h2>{html.escape(ix.output)}</h2><p class='note'>{html.escape(accuracy)} The "
+            "intervals hold the GP's uncertainty (its posterior paths, "
+            f"{ix.paths} of them, at fixed hyperparameters) and the Saltelli sample's error "
+            f"(N = {ix.base}).</p>{warning}"
+            + _table(header, rows)
+            + _image(bars, f"Sobol indices with 95 % intervals, {ix.output}")
+        )
+    chosen = [[i + 1, n, f"{proposal.score[n]:.3f}", proposal.deciding[n]]
+              for i, n in enumerate(proposal.selected)]  # fmt: skip
+    cap = "" if proposal.max_parameters is None else f", at most {proposal.max_parameters}"
+    summary = (
+        "<h2>Proposed parameters</h2><p>Parameters whose total Sobol index ST reaches "
+        f"{proposal.threshold:g} of the largest ST for at least one output{cap}. Set "
+        "<code>screen = false</code> on them (<code>bayescal screen --apply</code> does) and "
+        "<code>screen = true</code> on the others.</p>"
+        + _table(["#", "parameter", "score (ST/max)", "deciding output"], chosen)
+        + _table(["", ""], [[k, v] for k, v in facts.items()])
+    )
+    title = html.escape(f"Screening: {study_name}")
+    page = (
+        f"<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'><title>{title}</title>"
+        f"<style>{CSS}</style></head><body><h1>{title}</h1><p class='note'>bayescal "
+        f"{html.escape(__version__)}; Sobol indices (SALib) of the {statistic} of each output "
+        "over the training periods, computed on a GP fitted to a Latin hypercube of runs over "
+        f"the prior ranges.</p>{summary}{''.join(sections)}</body></html>\n"
     )
     return atomic_write_text(folder / PAGE, page)

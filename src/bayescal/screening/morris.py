@@ -22,13 +22,14 @@ doing the sampling and the analysis:
 
 Proposal
 --------
-For each output, a parameter's *score* is its ``mu*`` over the largest
-``mu*`` of that output (1 for the most influential); its score is its best
-over the outputs, so a parameter that matters for one output only is kept.
-Parameters whose score reaches ``threshold`` are proposed, most influential
-first, at most ``max_parameters`` of them. This is a screening rule, not a
-test: look at the ``mu*``-``sigma`` plot before dropping a parameter whose
-interval reaches the threshold.
+:func:`~bayescal.screening.proposal.propose` (re-exported here): for each
+output, a parameter's *score* is its ``mu*`` over the largest ``mu*`` of that
+output (1 for the most influential); its score is its best over the outputs,
+so a parameter that matters for one output only is kept. Parameters whose
+score reaches ``threshold`` are proposed, most influential first, at most
+``max_parameters`` of them. This is a screening rule, not a test: look at the
+``mu*``-``sigma`` plot before dropping a parameter whose interval reaches the
+threshold.
 """
 
 from __future__ import annotations
@@ -40,6 +41,7 @@ import numpy as np
 
 from bayescal.errors import ConfigError
 from bayescal.optional import require
+from bayescal.screening.proposal import Proposal, propose
 
 __all__ = [
     "MorrisDesign",
@@ -156,6 +158,11 @@ class MorrisIndices:
     trajectories: int
 
     @property
+    def measure(self) -> str:
+        """The index the proposal ranks by: ``"mu*"``."""
+        return "mu*"
+
+    @property
     def normalised(self) -> np.ndarray:
         """``mu*`` over the largest ``mu*`` of this output (0 if all are 0)."""
         top = float(np.max(self.mu_star)) if self.mu_star.size else 0.0
@@ -231,56 +238,3 @@ def morris_indices(
         mu_star_conf=column("mu_star_conf"),
         trajectories=int(used),
     )
-
-
-@dataclass(frozen=True)
-class Proposal:
-    """The parameters proposed for calibration (see the module notes).
-
-    Attributes
-    ----------
-    selected
-        Proposed parameters, most influential first.
-    score
-        Parameter -> best normalised ``mu*`` over the outputs. [-]
-    deciding
-        Parameter -> the output where its score was reached.
-    threshold
-        Score a parameter must reach. [-]
-    max_parameters
-        Cap on the number proposed (``None``: no cap).
-    """
-
-    selected: tuple[str, ...]
-    score: dict[str, float]
-    deciding: dict[str, str]
-    threshold: float
-    max_parameters: int | None
-
-
-def propose(
-    indices: Sequence[MorrisIndices], threshold: float = 0.1, max_parameters: int | None = None
-) -> Proposal:
-    """The parameters whose ``mu*`` reaches ``threshold`` of the top one for some output.
-
-    Parameters
-    ----------
-    indices
-        Morris indices, one per output (same parameter names).
-    threshold
-        Fraction of the largest ``mu*`` of an output. [-]
-    max_parameters
-        Propose at most this many.
-    """
-    if not indices:
-        raise ValueError("propose needs the indices of at least one output")
-    names = indices[0].names
-    table = np.vstack([ix.normalised for ix in indices])  # (outputs, k)
-    best = np.argmax(table, axis=0)
-    score = {n: float(table[best[j], j]) for j, n in enumerate(names)}
-    deciding = {n: indices[int(best[j])].output for j, n in enumerate(names)}
-    order = sorted(names, key=lambda n: -score[n])
-    selected = [n for n in order if score[n] >= threshold]
-    if max_parameters is not None:
-        selected = selected[:max_parameters]
-    return Proposal(tuple(selected), score, deciding, float(threshold), max_parameters)
