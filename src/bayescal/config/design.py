@@ -62,13 +62,14 @@ class DesignSection(Section):
         ge=2,
     )
     tolerance: float = field_doc(
-        "sequential: the design stops when, for every calibrated output, the emulator's "
-        "root mean squared error on the newest batch (run at posterior draws, predicted "
-        "before the batch joined the emulator's runs) is at most this fraction of the "
-        "output's posterior noise standard deviation. 0.3 means the emulator's error adds "
-        "at most about 9 % to the noise variance. [-]",
-        0.3,
-        default=0.3,
+        "sequential: the design stops when the emulator's error measured on the newest "
+        "batch (run at posterior draws, predicted before the batch joined the emulator's "
+        "runs) would move the posterior mean by at most this many posterior standard "
+        "deviations (the Mahalanobis length of the least-squares shift, docs/method.md "
+        "'Sequential design'); it also stops after three batches without a smaller shift "
+        "(the emulator's error floor). [-]",
+        0.2,
+        default=0.2,
         gt=0,
     )
     max_minutes: float | None = field_doc(

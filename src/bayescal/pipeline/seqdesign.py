@@ -16,15 +16,18 @@ et al. 2018, Sürer, Plumlee and Wild 2024):
    parameter divided by its posterior SD), away from each other and from the
    runs already made. Before the batch joins the runs, the current emulator's
    mean predictions at its points are kept;
-4. the batch is simulated, and the emulator's **measured** error on it (root
-   mean squared difference between those predictions and the runs, over the
-   training periods) is compared with each output's posterior noise SD; the
-   design stops when the ratio is at most ``[design] tolerance`` for every
-   calibrated output, or at ``max_runs`` runs, or once ``max_minutes`` have
-   passed. Otherwise back to 2.
+4. the batch is simulated, and the current emulator's **measured** error on it
+   (the runs minus the predictions kept in 3, projected on the basis: the
+   out-of-basis rest does not shrink with more runs) is turned into the shift
+   it would cause in the posterior mean, in posterior SDs (:func:`posterior_shift`:
+   the Mahalanobis length ``|P_J e| / sigma`` of the least-squares shift, ``J``
+   the emulator's sensitivities at the posterior mean). The design stops when
+   that shift is at most ``[design] tolerance``, after three batches without a
+   smaller shift (the emulator's error floor: the GP's nugget), at
+   ``max_runs`` runs, or once ``max_minutes`` have passed. Otherwise back to 2.
 
-The final design (every run made, failed ones included: the simulate stage
-drops them as it always does) is the design stage's result; the later stages
+The final design (every run that succeeded: a failed run is said, dropped from
+the design and not tried again) is the design stage's result; the later stages
 train the emulator and calibrate on it with the study's full settings.
 
 The loop's state is written atomically to ``OUTPUT_DIR/sequential/state.npz``
