@@ -8,10 +8,10 @@ its key path, the value received and what was expected, on one line
 (:mod:`bayescal.config.messages`).
 
 This module holds :class:`Study`, the small sections (``[study]``,
-``[outputs]``, ``[periods]``, ``[emulator]``,
-``[calibration]``, ``[predict]``, ``[runner]``) and the checks across
-sections; ``[data]``, ``[design]``, ``[parameters]``, ``[simulator]``, ``[discrepancy]`` and
-``[screening]`` have modules of their own in :mod:`bayescal.config`.
+``[outputs]``, ``[periods]``, ``[emulator]``, ``[runner]``) and the checks
+across sections; ``[data]``, ``[design]``, ``[predict]``, ``[parameters]``,
+``[simulator]``, ``[calibration]``, ``[discrepancy]`` and ``[screening]`` have
+modules of their own in :mod:`bayescal.config`.
 """
 
 from __future__ import annotations
@@ -51,6 +51,7 @@ from bayescal.config.discrepancy import DiscrepancySection
 from bayescal.config.messages import format_errors
 from bayescal.config.outputs import OutputsSection
 from bayescal.config.parameters import DerivedSpec, Parameter, reserved_name_problems
+from bayescal.config.predict import PredictSection
 from bayescal.config.screening import ScreeningSection
 from bayescal.config.simulators import SimulatorSection
 from bayescal.config.targets import KIND_UNITS, SENSOR_PREFIX, normal_unit, parse_sensor_target
@@ -240,52 +241,6 @@ class EmulatorSection(Section):
         if self.pca_components is not None and "pca_variance" in self.model_fields_set:
             raise ValueError("give pca_variance or pca_components, not both")
         return self
-
-
-class PredictSection(Section):
-    """``[predict]``: calibrated predictions on the training and test windows."""
-
-    draws: int = field_doc(
-        "Posterior draws (thinned evenly over all chains) propagated through the emulator.",
-        300,
-        default=300,
-        ge=20,
-    )
-    level: float = field_doc(
-        "Probability of the prediction band. [-]", 0.95, default=0.95, gt=0, lt=1
-    )
-    method: Literal["emulator", "simulator"] = field_doc(
-        "Calibrated predictions from the simulator re-run at `runs` posterior draws (the "
-        "default: exact physics, bands that hold their rate on test periods whose "
-        "conditions the training periods did not span; costs `runs` runs), or from the "
-        "emulator at `draws` posterior draws (no runs, for a simulator too slow to re-run; "
-        "on the test window the emulator is conditioned on the design runs there too and "
-        "its band adds the part of those runs outside the output basis beyond the training "
-        "periods' share: over the validation's known truths its 95 % band covered "
-        "0.945-0.957 of the test samples, the simulator route's 0.950-0.969). With a "
-        "discrepancy, the corrected prediction adds "
-        "Delta to the same kind of prediction (for 'simulator': runs at draws of the "
-        "Delta phase's theta*).",
-        "emulator",
-        default="simulator",
-    )
-    runs: int = field_doc(
-        "Posterior draws at which the simulator is re-run (method = 'simulator').",
-        50,
-        default=50,
-        ge=10,
-    )
-    noise: Literal["simulator", "calibration"] = field_doc(
-        "Observation noise in the bands of method = 'simulator': 'simulator' (the default) "
-        "estimates each output's noise again at every draw from the re-run simulator's "
-        "residuals on the training periods (its posterior mean given them; the "
-        "calibration's lambda* also holds the emulator's own error, which a re-run "
-        "simulator does not make, and its bands over-covered where the emulator was the "
-        "weak link); 'calibration' uses the draw's lambda*. Outputs with a discrepancy, "
-        "and the corrected prediction, always use lambda*.",
-        "calibration",
-        default="simulator",
-    )
 
 
 class RunnerSection(Section):

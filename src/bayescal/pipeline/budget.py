@@ -250,7 +250,7 @@ def estimate(study: Study, measured: MeasuredData) -> list[Need]:
                 (disc.realisations * m_all * rows + draws) * _F,
             )
         )
-    if predict.method == "simulator":
+    if predict.method in ("simulator", "auto"):  # auto: at most the simulator route
         needs.append(
             Need(
                 "predictions",
@@ -398,7 +398,7 @@ def estimate_time(study: Study, measured: MeasuredData) -> TimeEstimate:
         detail = f"{cal.chains} chains × {burn + samples} sweeps × {d} coordinates"
         seconds = cal.chains * (burn + samples) * d * move
         parts.append(TimeNeed("difference process", key, detail, seconds))
-    simulator = runs + (s.predict.runs if s.predict.method == "simulator" else 0)
+    simulator = runs + (s.predict.runs if s.predict.method in ("simulator", "auto") else 0)
     return TimeEstimate(tuple(parts), simulator)
 
 

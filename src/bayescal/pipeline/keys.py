@@ -99,6 +99,14 @@ def _likelihood_discrepancy(study: Study) -> bool:
 Item = tuple[str, Any, bool]
 
 
+def _predict_dump(predict: dict[str, Any]) -> dict[str, Any]:
+    """``[predict]`` as the predict key sees it: the check of ``method = "auto"`` only
+    where it is used (a study without it keeps the key it always had)."""
+    if predict.get("method") == "auto":
+        return predict
+    return {k: v for k, v in predict.items() if k not in ("check_runs", "check_tolerance")}
+
+
 def _keyed(stage: str, items: list[Item]) -> tuple[str, dict[str, str]]:
     """The key of ``stage`` (the digest of the items' values in order, exactly as the
     keys were always computed) and a short digest of each named input."""
@@ -193,7 +201,7 @@ def keys_and_inputs(ctx: Context) -> tuple[dict[str, str], dict[str, dict[str, s
     stage(
         "predict",
         ("the discrepancy stage", keys["discrepancy"], False),
-        ("predict", dump["predict"], True),
+        ("predict", _predict_dump(dump["predict"]), True),
         ("nominal values", {n: p.nominal for n, p in s.parameters.items()}, False),
         *([("held-out sensors", _held_out_key(ctx), False)] if s.outputs.held_out else []),
         # an in-likelihood discrepancy is conditioned on the training residuals (it added

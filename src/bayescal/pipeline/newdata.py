@@ -351,6 +351,8 @@ def predict_new(
     outside = conditions_outside(em.assembled, at.x_test)
     notes: list[str] = []
     chosen = method or ctx.study.predict.method
+    if chosen == "auto":  # its check measured the study's own test window, not this record
+        chosen = "simulator"
     if chosen == "emulator" and outside:
         if method == "emulator":
             raise ConfigError(

@@ -179,7 +179,7 @@ def _mixture_band(
     return band
 
 
-def _thin(posterior: Posterior, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def thin_draws(posterior: Posterior, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``n`` draws spread evenly over all chains: theta* ``(n, t)``, lambda* ``(n, O)``
     and the draws' indices in the flattened draws."""
     theta = posterior.draws.reshape(-1, len(posterior.names))
@@ -188,7 +188,7 @@ def _thin(posterior: Posterior, n: int) -> tuple[np.ndarray, np.ndarray, np.ndar
     return theta[pick], lam_stars[pick], pick
 
 
-def _period_moments(
+def period_moments(
     emulator: Emulator,
     theta: np.ndarray,
     lam_stars: np.ndarray,
@@ -227,7 +227,7 @@ def _period_moments(
     return mean, var
 
 
-def _place(
+def place_periods(
     layout: PeriodLayout, starts: np.ndarray, values: np.ndarray, out: np.ndarray, begin: int
 ) -> None:
     """Write period columns ``values`` ``(..., n, P)`` into ``out`` ``(..., n_total)`` at
@@ -276,10 +276,10 @@ def predict_band(
     Band
         NaN outside the training periods and the test window.
     """
-    theta, lam_stars, pick = _thin(posterior, draws)
+    theta, lam_stars, pick = thin_draws(posterior, draws)
     layout = assembled.layout
     emulator = emulator_with_test_window(emulator, assembled)
-    parts = _predicted_parts(assembled)
+    parts = predicted_parts(assembled)
     slices = emulator.outputs.slices
     s = theta.shape[0]
     means = {n: np.full((s, layout.n_total), np.nan) for n in slices}
@@ -289,10 +289,10 @@ def predict_band(
         if not len(starts):
             continue
         extra = excess if i else np.zeros_like(excess)  # parts: training periods, test window
-        mean, var = _period_moments(emulator, theta, lam_stars, x, discrepancy, extra)
+        mean, var = period_moments(emulator, theta, lam_stars, x, discrepancy, extra)
         for name, sl in slices.items():
-            _place(layout, starts, mean[:, sl], means[name], begin)
-            _place(layout, starts, var[:, sl], variances[name], begin)
+            place_periods(layout, starts, mean[:, sl], means[name], begin)
+            place_periods(layout, starts, var[:, sl], variances[name], begin)
     order = list(slices)
     for name, (mean, var) in conditioned_discrepancy(emulator, assembled, posterior, pick).items():
         noise = _phase_sd(assembled, name) ** 2 / lam_stars[:, order.index(name), None]
@@ -381,7 +381,7 @@ def conditioned_discrepancy(
     t = len(posterior.names)
     unit = posterior.unit_draws.reshape(-1, t)[pick]
     aux = np.asarray(posterior.aux, dtype=float).reshape(-1, len(posterior.aux_names))[pick]
-    parts = _predicted_parts(target)
+    parts = predicted_parts(target)
     x_new = np.vstack([x for x, _, _ in parts])
     m = assembled.n_periods
     x_all = np.vstack([assembled.x, x_new])
@@ -419,8 +419,8 @@ def conditioned_discrepancy(
             col = 0  # a part's rows of x (the training periods of another record: none placed)
             for x, starts, begin in parts:
                 cols = slice(col, col + len(starts))
-                _place(layout, starts, mu[:, cols], mean[s], begin)
-                _place(layout, starts, v[:, cols], var[s], begin)
+                place_periods(layout, starts, mu[:, cols], mean[s], begin)
+                place_periods(layout, starts, v[:, cols], var[s], begin)
                 col += x.shape[0]
         out[name] = (mean, var)
     return out
@@ -612,17 +612,17 @@ def delta_series(
     layout = assembled.layout
     out = {n: np.full(layout.n_total, np.nan) for n in names}
     slices = dict(zip(names, _slices(assembled), strict=True))
-    parts = _predicted_parts(assembled)
+    parts = predicted_parts(assembled)
     for x, starts, begin in parts:
         if len(starts):
             mean, var = discrepancy.predict(x)
             values = var if variance else mean
             for name, sl in slices.items():
-                _place(layout, starts, values[sl], out[name], begin)
+                place_periods(layout, starts, values[sl], out[name], begin)
     return out
 
 
-def _predicted_parts(assembled: Assembled) -> list[tuple[np.ndarray, np.ndarray, int]]:
+def predicted_parts(assembled: Assembled) -> list[tuple[np.ndarray, np.ndarray, int]]:
     """``(x, period starts, first sample)`` of the training periods and of the test window."""
     layout = assembled.layout
     parts = [(assembled.x, layout.train_starts, 0)]

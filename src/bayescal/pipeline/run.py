@@ -38,6 +38,7 @@ from bayescal.discrepancy import Discrepancy
 from bayescal.errors import BayescalError, ConfigError, DataError
 from bayescal.pipeline.budget import check_budget, estimate_time
 from bayescal.pipeline.keys import keys_and_inputs
+from bayescal.pipeline.route import check_route
 from bayescal.pipeline.stages import (
     Context,
     EmulatorResult,
@@ -460,7 +461,12 @@ def _predictions(
     if ok:
         return found
     start = time.perf_counter()
-    pred = predict_stage(r.ctx, em, post, disc, nominal_run(r.ctx))
+    route = None
+    if r.ctx.study.predict.method == "auto":
+        check = check_route(r.ctx, em, post)
+        r._note(check.line())
+        route = check.route
+    pred = predict_stage(r.ctx, em, post, disc, nominal_run(r.ctx), method=route)
     files = predictions_store.save_predictions(r.out, pred.dataset, pred.metrics)
     held = held_out_outputs(dict(pred.dataset.attrs))
     for verdict in catalogue_verdicts(pred.metrics, held):

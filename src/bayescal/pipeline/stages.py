@@ -467,13 +467,21 @@ def predict_stage(
     posterior: Posterior,
     discrepancy: Discrepancy | None = None,
     nominal: dict[str, np.ndarray] | None = None,
+    method: str | None = None,
 ) -> Predictions:
-    """Nominal, calibrated (and corrected) predictions with bands, and their metrics."""
+    """Nominal, calibrated (and corrected) predictions with bands, and their metrics.
+
+    ``method`` (``"emulator"`` or ``"simulator"``) overrides ``[predict] method``:
+    the route that ``method = "auto"`` chose (:mod:`bayescal.pipeline.route`).
+    """
     section = ctx.study.predict
-    band = _band(ctx, em, posterior, None)
+    route = method or section.method
+    if route == "auto":
+        raise ValueError("predict_stage needs the route 'auto' chose (bayescal.pipeline.route)")
+    band = _band(ctx, em, posterior, None, route)
     corrected = delta = None
     if discrepancy is not None:
-        corrected = _band(ctx, em, discrepancy.posterior, discrepancy)
+        corrected = _band(ctx, em, discrepancy.posterior, discrepancy, route)
         delta = delta_series(em.assembled, discrepancy, list(em.emulator.outputs.names))
     m = ctx.measured
     held = ctx.study.outputs.held_out
@@ -486,7 +494,12 @@ def predict_stage(
         m.forcing.series,
         corrected,
         delta,
-        attrs={"level": section.level, "study": ctx.study.study.name, "held_out": ",".join(held)},
+        attrs={
+            "level": section.level,
+            "study": ctx.study.study.name,
+            "held_out": ",".join(held),
+            "route": route,
+        },
     )
     return Predictions(ds, metrics_table(ds))
 
@@ -516,7 +529,11 @@ def posterior_runs(
 
 
 def _band(
-    ctx: Context, em: EmulatorResult, posterior: Posterior, discrepancy: Discrepancy | None
+    ctx: Context,
+    em: EmulatorResult,
+    posterior: Posterior,
+    discrepancy: Discrepancy | None,
+    route: str,
 ) -> Band:
     section = ctx.study.predict
     measured = {o: ctx.measured.outputs[o] for o in ctx.study.outputs.calibrate}
@@ -527,7 +544,7 @@ def _band(
     # their conditions only the simulator is trustworthy (Twin House test week:
     # emulator + Delta RMSE 2.25 W/m², simulator + Delta see docs/validation/case-studies-log.md).
     transforms = ctx.transforms
-    if section.method == "simulator":
+    if route == "simulator":
         runs, lam_star, drawn = posterior_runs(ctx, posterior, section.runs)
         model_runs = level_values(ctx, {o: runs[o] for o in em.emulator.outputs.names}, "simulated")
         if discrepancy is None and section.noise == "simulator":

@@ -443,6 +443,15 @@ def write_figures(inputs: ReportInputs, folder: str | Path) -> list[FigureEntry]
 # ----------------------------------------------------------------------------- sections
 
 
+def _route(ds: xr.Dataset) -> str:
+    """Which route made the bands (``method = "auto"`` records the one it chose)."""
+    route = str(ds.attrs.get("route", ""))
+    return {
+        "simulator": "the simulator re-run at posterior draws",
+        "emulator": "the emulator at posterior draws",
+    }.get(route, "not recorded (predictions from an earlier bayescal)")
+
+
 def _summary(inputs: ReportInputs) -> str:
     """The first screen: warnings, the verdicts, the fit, the calibrated quantities."""
     post, ds = inputs.posterior, inputs.predictions
@@ -457,6 +466,7 @@ def _summary(inputs: ReportInputs) -> str:
         ("calibration parameters", ", ".join(post.names)),
         ("outputs", ", ".join(_outputs(ds))),
         ("posterior draws", f"{chains} chains × {draws} draws"),
+        ("bands from ([predict] method)", _route(ds)),
         ("in-likelihood discrepancy ([outputs.errors.NAME] discrepancy)", inside),
         ("difference process Δ ([discrepancy] enabled)", difference),
     ]

@@ -1,0 +1,112 @@
+"""``[predict] method = "auto"``: the emulator's bands where it is measured good enough.
+
+The simulator route re-runs the simulator at ``[predict] runs`` posterior draws;
+the emulator route makes no run. ``auto`` decides by measurement, not by
+assumption: the simulator is run at ``[predict] check_runs`` of those draws (a
+subset of the simulator route's own draws, so that these runs are reused from
+the run cache if the simulator route is taken), and the emulator's mean at the
+same draws (conditioned on the design runs over the test window, as the
+emulator route's is: :func:`bayescal.pipeline.predict.emulator_with_test_window`)
+is compared with them on the test window. Those runs are held out: the emulator
+never saw them. When the root mean squared difference of every calibrated output
+is at most ``[predict] check_tolerance`` times the output's posterior noise SD,
+the emulator route gives the bands; otherwise the simulator route does. Without
+a test window the training periods are compared instead.
+
+With an emulator error of ``c`` noise SDs the band's centre is off by about
+``c`` SDs of the noise; at ``c = 0.3`` a 95 % band of noise alone would cover
+about 94 %: the default tolerance.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from bayescal.calibration.posterior import Posterior
+from bayescal.design import Design
+from bayescal.pipeline.predict import (
+    emulator_with_test_window,
+    period_moments,
+    place_periods,
+    predicted_parts,
+    thin_draws,
+)
+from bayescal.pipeline.stages import Context, EmulatorResult, level_values, simulate
+
+__all__ = ["RouteCheck", "check_route"]
+
+
+@dataclass(frozen=True)
+class RouteCheck:
+    """What ``method = "auto"`` measured and chose.
+
+    Attributes
+    ----------
+    route
+        ``"emulator"`` or ``"simulator"``.
+    ratio
+        Output -> the emulator's RMS error at the held-out runs over the output's
+        posterior noise SD.
+    runs
+        Held-out runs that succeeded.
+    window
+        ``"test"`` (the test window) or ``"train"`` (no test window).
+    tolerance
+        ``[predict] check_tolerance``.
+    """
+
+    route: str
+    ratio: dict[str, float]
+    runs: int
+    window: str
+    tolerance: float
+
+    def line(self) -> str:
+        """One line for the terminal and the log."""
+        worst = ", ".join(f"{o} {r:.2f}" for o, r in self.ratio.items())
+        return (
+            f"predict: method = 'auto' chose the {self.route} route: the emulator's error at "
+            f"{self.runs} held-out runs at posterior draws on the {self.window} window is "
+            f"{worst} x the noise SD (emulator at most {self.tolerance:g})"
+        )
+
+
+def check_draws(n_route: int, n_check: int, total: int) -> np.ndarray:
+    """Indices (into the simulator route's thinned draws) of the held-out runs."""
+    have = min(n_route, total)
+    return np.unique(np.linspace(0, have - 1, min(n_check, have)).astype(int))
+
+
+def check_route(ctx: Context, em: EmulatorResult, posterior: Posterior) -> RouteCheck:
+    """Run the held-out check of ``method = "auto"`` (module docstring) and choose."""
+    section = ctx.study.predict
+    theta, _, pick = thin_draws(posterior, section.runs)  # the simulator route's draws
+    sub = check_draws(section.runs, section.check_runs, len(pick))
+    theta, pick = theta[sub], pick[sub]
+    sims = simulate(ctx, Design.from_values(ctx.priors, theta))
+    names = list(em.emulator.outputs.names)
+    runs = level_values(ctx, {o: sims.outputs[o] for o in names}, "simulated")
+    assembled = em.assembled
+    layout = assembled.layout
+    parts = predicted_parts(assembled)
+    x, starts, begin = parts[-1]
+    window = "test" if len(parts) > 1 else "train"
+    emulator = emulator_with_test_window(em.emulator, assembled)
+    ok = theta[sims.indices]
+    lam = posterior.lam_stars.reshape(-1, len(names))[pick[sims.indices]]
+    mean, _ = period_moments(emulator, ok, lam, x, None, np.zeros(emulator.outputs.sd.shape))
+    noise = {o: float(np.median(v)) for o, v in posterior.noise_sd().items()}
+    ratio: dict[str, float] = {}
+    for name, sl in emulator.outputs.slices.items():
+        series = np.full((len(ok), layout.n_total), np.nan)
+        place_periods(layout, starts, mean[:, sl], series, begin)
+        diff = series - runs[name]
+        used = np.isfinite(diff)
+        rms = float(np.sqrt(np.mean(diff[used] ** 2))) if used.any() else float("inf")
+        ratio[name] = rms / noise[name] if name in noise else float("inf")
+    good = len(ok) > 0 and all(r <= section.check_tolerance for r in ratio.values())
+    return RouteCheck(
+        "emulator" if good else "simulator", ratio, len(ok), window, section.check_tolerance
+    )

@@ -1,0 +1,82 @@
+"""``[predict] method = "auto"``: the route chosen by the emulator's error at held-out runs.
+
+The tiny virtual-wall study of ``test_seqdesign`` (8 design runs, two basis
+vectors): its emulator misses the simulator on the test window by more than
+the noise, so the default tolerance takes the simulator route; a tolerance above
+that error takes the emulator route and makes only the held-out runs.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from test_seqdesign import _study
+
+from bayescal.config import load_study
+from bayescal.pipeline import Options, Results, run
+from bayescal.pipeline.predict import thin_draws
+from bayescal.pipeline.route import check_draws
+from bayescal.pipeline.stages import prepare
+
+RUNS, CHECK = 10, 4
+
+
+def _auto(folder: Path, tolerance: float) -> tuple[list[str], Results, int]:
+    _study(folder, "[design]\nruns = 8\n")
+    text = (folder / "study.toml").read_text(encoding="utf-8")
+    text += (
+        f'\n[predict]\nmethod = "auto"\nruns = {RUNS}\ncheck_runs = {CHECK}\n'
+        f"check_tolerance = {tolerance}\n"
+    )
+    (folder / "study.toml").write_text(text, encoding="utf-8")
+    said: list[str] = []
+    study = load_study(folder)
+    res = run(study, until="predict", options=Options(backend="serial"), say=said.append)
+    cached = len(list((prepare(study).out / "simulations" / "runs").glob("*.npz")))
+    return said, res, cached
+
+
+@pytest.fixture(scope="module")
+def simulator_route(tmp_path_factory: pytest.TempPathFactory) -> tuple[list[str], Results, int]:
+    return _auto(tmp_path_factory.mktemp("route") / "wall", 0.3)
+
+
+def test_a_poor_emulator_takes_the_simulator_route_reusing_the_held_out_runs(
+    simulator_route: tuple[list[str], Results, int],
+) -> None:
+    said, res, cached = simulator_route
+    (line,) = [s for s in said if "method = 'auto' chose" in s]
+    assert "chose the simulator route" in line
+    ratio = float(line.split("heat_flux_in ")[1].split(" x")[0])
+    assert ratio > 0.3
+    assert res.predictions is not None
+    assert res.predictions.dataset.attrs["route"] == "simulator"
+    assert cached == 8 + 1 + RUNS  # design, nominal, the route's runs (the check's among them)
+
+
+def test_a_tolerance_above_the_measured_error_takes_the_emulator_route(
+    simulator_route: tuple[list[str], Results, int], tmp_path: Path
+) -> None:
+    (first,) = [s for s in simulator_route[0] if "method = 'auto' chose" in s]
+    measured = float(first.split("heat_flux_in ")[1].split(" x")[0])
+    said, res, cached = _auto(tmp_path / "wall", 2 * measured)
+    (line,) = [s for s in said if "method = 'auto' chose" in s]
+    assert "chose the emulator route" in line
+    assert res.predictions is not None
+    assert res.predictions.dataset.attrs["route"] == "emulator"
+    assert cached == 8 + 1 + CHECK  # only the held-out runs were made
+
+
+def test_the_held_out_draws_are_among_the_simulator_routes_draws(
+    simulator_route: tuple[list[str], Results, int],
+) -> None:
+    post = simulator_route[1].posterior
+    assert post is not None
+    _, _, route = thin_draws(post, RUNS)
+    _, _, every = thin_draws(post, 10**9)
+    sub = check_draws(RUNS, CHECK, len(route))
+    assert len(sub) == CHECK
+    assert set(route[sub]) <= set(route) <= set(every)
+    assert np.all(np.diff(sub) > 0)
