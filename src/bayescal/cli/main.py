@@ -657,8 +657,9 @@ def compare(
 
     STUDIES are study files or folders: variants of one calibration
     (parameter sets, priors, error models, discrepancy on or off) on the same
-    measured data, two or more, or one to rank against its catalogue model. Each is run up to its calibrate stage (or its
-    finished stages are reused); then every training period is left out in
+    measured data, two or more, or one to rank against its catalogue model.
+    Each is run up to its calibrate stage (or its finished stages are
+    reused); then every training period is left out in
     turn and the measurements of that period are scored by their log density
     under the calibration on the others (PSIS, with exact refits where the
     Pareto k exceeds 0.7). The variants are ranked by the sum, the ELPD, with
