@@ -31,7 +31,7 @@ def ranked(variants: tuple[Path, Path, Path]) -> tuple[Result, Path]:
     root, white, ar1 = variants
     out = root / "ranking"
     args = ["compare", str(white), str(ar1), "--output", str(out), "--draws", "60"]
-    result = CliRunner().invoke(main, [*args, "--max-refits", "1", "--quiet"])
+    result = CliRunner().invoke(main, [*args, "--max-refits", "1", "--quiet", "--no-catalogue"])
     return result, out
 
 
@@ -88,7 +88,7 @@ def test_a_second_comparison_reuses_the_scores(
     root, white, ar1 = variants
     first = pd.read_csv(ranked[1] / "compare.csv")
     args = ["compare", str(ar1), str(white), "--output", str(root / "again"), "--draws", "60"]
-    result = CliRunner().invoke(main, [*args, "--max-refits", "1"])
+    result = CliRunner().invoke(main, [*args, "--max-refits", "1", "--no-catalogue"])
     assert result.exit_code == 0, result.output
     assert "white: calibrate: up to date, reused" in result.output
     assert "white: leave-period-out scores up to date, reused" in result.output
@@ -129,7 +129,7 @@ def test_a_variant_whose_calibration_failed_is_marked_not_ranked_silently(
     monkeypatch.setattr(compare_module, "_calibrated", shaky)
     out = root / "shaky"
     args = ["compare", str(ar1), str(white), "--output", str(out), "--draws", "60"]
-    result = CliRunner().invoke(main, [*args, "--max-refits", "1", "--quiet"])
+    result = CliRunner().invoke(main, [*args, "--max-refits", "1", "--quiet", "--no-catalogue"])
     assert result.exit_code == 0, result.output
     table = pd.read_csv(out / "compare.csv").set_index("variant")
     assert table.loc["white", "diagnostics"] == "failed"
@@ -161,9 +161,9 @@ def _one_line_error(result: Result, *needles: str) -> None:
 
 def test_fewer_than_two_studies(variants: tuple[Path, Path, Path]) -> None:
     _, white, _ = variants
-    result = CliRunner().invoke(main, ["compare", str(white)])
+    result = CliRunner().invoke(main, ["compare", str(white), "--no-catalogue"])
     _one_line_error(result, "at least two studies", "got 1")
-    _one_line_error(CliRunner().invoke(main, ["compare"]), "got 0")
+    _one_line_error(CliRunner().invoke(main, ["compare"]), "at least one study", "got 0")
     twice = CliRunner().invoke(main, ["compare", str(white), str(white / "study.toml")])
     _one_line_error(twice, "given more than once")
 
@@ -198,3 +198,60 @@ def test_a_failing_study_is_named(variants: tuple[Path, Path, Path], tmp_path: P
     path.write_text(text.replace("lower = 0.08, upper = 0.16", "lower = -0.2, upper = -0.1"))
     result = CliRunner().invoke(main, ["compare", str(broken), str(white), "-q"])
     _one_line_error(result, "broken: running up to calibrate failed")
+
+
+LOUD = (
+    "calibration does not improve on the catalogue values on the left-out periods: the "
+    "parameters absorb model error; treat them as fitting constants, not properties"
+)
+
+
+def test_one_study_against_its_catalogue(
+    variants: tuple[Path, Path, Path], ranked: tuple[Result, Path]
+) -> None:
+    """The catalogue is on by default: one study is ranked against its nominal values
+    (its calibration reused from the fixture), the row marked, the verdict said."""
+    root, _, ar1 = variants
+    out = root / "catalogue"
+    args = ["compare", str(ar1), "--output", str(out), "--draws", "60", "--max-refits", "1"]
+    result = CliRunner().invoke(main, args)
+    assert result.exit_code == 0, result.output
+    assert result.output.splitlines()[0].startswith("compare: 1 variants and 1 catalogue model")
+    assert "ar1: calibrate: up to date, reused" in result.output
+    assert "catalogue: fitting the error model with every parameter at its nominal value" in (
+        result.output
+    )
+    table = pd.read_csv(out / "compare.csv", keep_default_na=False).set_index("variant")
+    assert list(table.index) in (["ar1", "catalogue"], ["catalogue", "ar1"])
+    assert table.loc["catalogue", "model"] == "catalogue"
+    assert table.loc["catalogue", "catalogue_of"] == "ar1"
+    assert table.loc["ar1", "model"] == "calibrated"
+    assert table.loc["catalogue", "parameters"] == "nominal: k_cb=0.12 cp_cb=800"
+    assert "[catalogue: the nominal values, error model of ar1]" in result.output
+    # the loud line exactly when the catalogue is ahead or within one SE behind
+    behind = table.loc["ar1", "elpd"] - table.loc["catalogue", "elpd"]
+    se = float(table["se_diff"].max())
+    warned = f"WARNING: {LOUD}" in result.output
+    assert warned == (behind <= se), result.output
+    summary = (out / "compare.md").read_text(encoding="utf-8")
+    assert (f"**WARNING: {LOUD}" in summary) == warned
+    if not warned:
+        assert "note: ar1 improves on the catalogue values on the left-out periods" in (
+            result.output
+        )
+    # a second comparison reuses the catalogue's scores and fit
+    args[3] = str(root / "catalogue-again")
+    again = CliRunner().invoke(main, args)
+    assert again.exit_code == 0, again.output
+    assert "catalogue: leave-period-out scores up to date, reused" in again.output
+    assert "fitting the error model" not in again.output
+    assert pd.read_csv(root / "catalogue-again" / "compare.csv")["elpd"].tolist() == (
+        pd.read_csv(out / "compare.csv")["elpd"].tolist()
+    )
+
+
+def test_the_catalogue_option_is_in_the_cli_reference() -> None:
+    reference = Path(__file__).resolve().parents[2] / "docs" / "cli.md"
+    text = reference.read_text(encoding="utf-8")
+    assert "| `--catalogue` / `--no-catalogue` | flag | `--catalogue` |" in text
+    assert "Also rank the catalogue model" in text

@@ -323,7 +323,13 @@ def test_a_study_with_relative_errors_runs_and_compare_prefers_the_true_error_mo
     rows = m[(m["window"] == "train")].set_index("model")
     assert rows.loc["calibrated", "mse"] < rows.loc["nominal", "mse"]
     assert 0.8 < np.mean((measured >= lower) & (measured <= upper)) <= 1.0
-    result = compare([relative, absolute], output=tmp_path / "cmp", options=options, max_refits=0)
+    result = compare(
+        [relative, absolute],
+        output=tmp_path / "cmp",
+        options=options,
+        max_refits=0,
+        catalogue=False,
+    )
     ranked = [v.label for v in result.variants]
     assert ranked[0] == "absolute", result.table
     gap = result.variants[0].scores.elpd - result.variants[1].scores.elpd

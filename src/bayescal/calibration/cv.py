@@ -465,6 +465,7 @@ def refit_period(
     draws_per_chain: int = 250,
     callback: Tick | None = None,
     moves: Moves = "gibbs",
+    held: ArrayLike | None = None,
 ) -> tuple[float, Posterior, FloatArray]:
     """``elpd_i`` of ``period`` by an exact refit without its measurements (physical units).
 
@@ -492,6 +493,10 @@ def refit_period(
         Progress of the chains (iterations over all chains).
     moves
         How the sweeps move the coordinates, as the calibration's.
+    held
+        theta* on the normalised scale ``(t,)`` held fixed, as the posterior's
+        (:func:`bayescal.calibration.target.hold_theta`: the catalogue model);
+        ``None``: sampled.
     """
     target = held_out_target(emulator, observations, list(priors.values()), period, algebra)
     names = tuple(priors)
@@ -505,6 +510,7 @@ def refit_period(
         names=(*names, *target.aux_names),
         callback=callback,
         moves=moves,
+        held=held,
     )
     draws = chains.draws
     t = target.t

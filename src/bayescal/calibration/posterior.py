@@ -335,6 +335,7 @@ def calibrate(
     moves: Moves = "gibbs",
     max_draws: int | None = None,
     on_extend: Callable[[int, int], Callable[[int], None] | None] | None = None,
+    held: Mapping[str, float] | None = None,
 ) -> Posterior:
     """Sample theta*, lambda and lambda* (eq. 16) with the hyperparameters at the MAP.
 
@@ -399,6 +400,12 @@ def calibrate(
         Called as ``on_extend(kept, longer)`` before each extension; it may
         return a new progress callback for the extension (else ``callback``
         keeps counting).
+    held
+        Every parameter name -> a value (physical units) to hold theta* at
+        (``"mwg"`` only; :func:`bayescal.calibration.target.hold_theta`): the
+        chains sample the error model's parameters alone and the draws of
+        theta* all equal these values (the catalogue model of ``bayescal
+        compare``: the nominal values). ``None`` (default): theta* is sampled.
 
     Returns
     -------
@@ -408,6 +415,8 @@ def calibrate(
         raise ConfigError(f"backend must be one of {list(BACKENDS)}, got {backend!r}")
     if sampler not in ("mwg", "nuts"):
         raise ConfigError(f"sampler must be 'mwg' or 'nuts', got {sampler!r}")
+    if held is not None and sampler != "mwg":
+        raise ConfigError("theta* can be held fixed with sampler 'mwg' only")
     if sampler == "nuts":
         check_installed()
         if n_burn < NUTS_MIN_WARMUP:
@@ -423,6 +432,7 @@ def calibrate(
                 hint="set [emulator] algebra = 'kronecker' or use sampler 'mwg'",
             )
     prior_map = check_priors(assembled, priors)
+    fixed = None if held is None else _held_unit(held, prior_map)
     target = build_target(
         emulator,
         assembled.w_star,
@@ -472,6 +482,7 @@ def calibrate(
                 checkpoint_seconds=checkpoint_seconds,
                 starts=starts,
                 moves=moves,
+                held=fixed,
             )
             post = _built(chains, target, prior_map, assembled, seed, algebra, observations)
             if post.diagnostics.ok or kept >= most:
@@ -482,6 +493,19 @@ def calibrate(
             assert checkpoint_dir is not None  # a temporary folder where none was given
             atomic_write_json(Path(checkpoint_dir) / EXTENSION_FILE, plan | {"kept": longer})
             kept = longer
+
+
+def _held_unit(held: Mapping[str, float], priors: Mapping[str, Prior]) -> FloatArray:
+    """The held values on the normalised scale, in the priors' order."""
+    if set(held) != set(priors):
+        raise ConfigError(
+            f"hold every parameter or none: got {sorted(held)}, the calibration has {list(priors)}"
+        )
+    unit = np.array([float(p.to_unit(held[name])) for name, p in priors.items()])
+    outside = [name for name, u in zip(priors, unit, strict=True) if not 0.0 <= u <= 1.0]
+    if outside:
+        raise ConfigError(f"the held value of {outside[0]} lies outside its prior bounds")
+    return unit
 
 
 EXTENSION_FILE = "extension.json"

@@ -19,6 +19,7 @@ priors, so a calibration can be rebuilt from the saved files alone.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import os
 from collections.abc import Callable, Sequence
@@ -50,6 +51,7 @@ __all__ = [
     "default_sampler",
     "default_starts",
     "emulator_algebra",
+    "hold_theta",
     "sample",
 ]
 
@@ -514,6 +516,43 @@ def _start_gammas(target: CalibrationPosterior) -> FloatArray:
     return np.array(pairs, dtype=float)
 
 
+def hold_theta(
+    sampler: MetropolisWithinGibbs, starts: ArrayLike, u: ArrayLike
+) -> tuple[MetropolisWithinGibbs, FloatArray]:
+    """The sampler and starts with every theta* coordinate held at ``u`` ``(t,)``.
+
+    The chains then sample only ``lambda``, the ``lambda*``, the ``phi`` and the
+    discrepancy's ``r`` of the same target: theta* keeps its start value
+    (the sampler's ``fixed`` coordinates, whose acceptance is NaN, so the
+    diagnostics pass over them), its coordinates leave the joint block and
+    their sampling maps become the identity (a value on a prior bound stays
+    a valid start). The catalogue model of ``bayescal compare`` is this target
+    at the nominal values (:mod:`bayescal.pipeline.catalogue`).
+    """
+    held = np.asarray(u, dtype=float).reshape(-1)
+    t = held.size
+    if not np.all((held >= 0.0) & (held <= 1.0)):
+        raise ConfigError(f"held theta* {held.tolist()} lies outside the prior bounds [0, 1]")
+    x0 = np.array(starts, dtype=float)
+    x0[:, :t] = held
+    d = x0.shape[1]
+    lower = list(sampler.lower if sampler.lower is not None else [-math.inf] * d)
+    upper = list(sampler.upper if sampler.upper is not None else [math.inf] * d)
+    lower[:t], upper[:t] = [-math.inf] * t, [math.inf] * t
+    joint = tuple(i for i in sampler.joint if i >= t)
+    joint = joint if len(joint) >= 2 else ()
+    held_sampler = dataclasses.replace(
+        sampler,
+        fixed=tuple(range(t)),
+        lower=lower,
+        upper=upper,
+        joint=joint,
+        joint_after_burn=len(joint) if joint and sampler.joint_after_burn else 0,
+        screen=sampler.screen and bool(joint),
+    )
+    return held_sampler, x0
+
+
 def sample(
     target: CalibrationPosterior,
     n_draws: int,
@@ -529,6 +568,7 @@ def sample(
     starts: ArrayLike | None = None,
     sampler: Any = None,
     moves: Moves = "gibbs",
+    held: ArrayLike | None = None,
 ) -> Chains:
     """Metropolis-within-Gibbs sweeps of ``target``, no diagnostics.
 
@@ -554,6 +594,10 @@ def sample(
     moves
         ``"gibbs"`` or ``"joint"``: how :func:`default_sampler` moves the
         coordinates (ignored with ``sampler``).
+    held
+        theta* on the normalised scale ``(t,)`` to hold fixed (:func:`hold_theta`;
+        a Metropolis-within-Gibbs ``sampler`` only): the chains sample the error
+        model's parameters alone. ``None``: theta* is sampled.
 
     Returns
     -------
@@ -561,8 +605,11 @@ def sample(
         Draws of ``[u, lambda, lambda*]``, ``(chains, draws, t + 2)``.
     """
     x0 = default_starts(target, n_chains, seed) if starts is None else starts
+    chosen = default_sampler(target, n_burn, moves) if sampler is None else sampler
+    if held is not None:
+        chosen, x0 = hold_theta(chosen, x0, held)
     return run_chains(
-        default_sampler(target, n_burn, moves) if sampler is None else sampler,
+        chosen,
         target,
         x0,
         n_draws,

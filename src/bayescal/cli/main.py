@@ -634,6 +634,14 @@ def report(study: Path) -> None:
     show_default=True,
     help="Posterior draws per chain used for the scores (thinned evenly).",
 )
+@click.option(
+    "--catalogue/--no-catalogue",
+    default=True,
+    show_default=True,
+    help="Also rank the catalogue model: every calibrated parameter at its nominal value, "
+    "the error model fitted on the same emulator, one row per distinct error model; a "
+    "WARNING line says when calibration does not beat it by more than one SE.",
+)
 @simulation_options
 @click.option("--quiet", "-q", is_flag=True, help="No progress bars or notes; the table only.")
 @user_errors
@@ -642,6 +650,7 @@ def compare(
     output: Path,
     max_refits: int,
     draws: int,
+    catalogue: bool,
     jobs: int | None,
     backend: str | None,
     scheduler: str | None,
@@ -649,10 +658,11 @@ def compare(
 ) -> None:
     """Rank variants of a study by leave-one-period-out cross-validation.
 
-    STUDIES are two or more study files or folders: variants of one
-    calibration (parameter sets, priors, error models, discrepancy on or off)
-    on the same measured data. Each is run up to its calibrate stage (or its
-    finished stages are reused); then every training period is left out in
+    STUDIES are study files or folders: variants of one calibration
+    (parameter sets, priors, error models, discrepancy on or off) on the same
+    measured data, two or more, or one to rank against its catalogue model.
+    Each is run up to its calibrate stage (or its finished stages are
+    reused); then every training period is left out in
     turn and the measurements of that period are scored by their log density
     under the calibration on the others (PSIS, with exact refits where the
     Pareto k exceeds 0.7). The variants are ranked by the sum, the ELPD, with
@@ -667,6 +677,16 @@ def compare(
     Before it starts it prints an order of magnitude of its cost (each
     variant's emulator and calibration from its sizes, and up to --max-refits
     refits of a calibration each), then a line as each variant starts.
+
+    The catalogue model is ranked too unless --no-catalogue: every calibrated
+    parameter held at its nominal value of the study file, the error model the
+    study states (noise precisions, AR(1) coefficients, discrepancy variances)
+    fitted with the same chains on the same emulator, and scored the same way,
+    one row per distinct error model among the variants (on the first such
+    variant's emulator). Where it ranks above the best calibrated variant of its
+    error model, or less than one SE of the paired difference below it, a
+    WARNING line says that calibration does not improve on the catalogue values
+    on the left-out periods: the parameters absorb model error.
 
     Writes compare.csv (the ranking), compare-periods.csv (every period of
     every variant), compare.png and compare.md into --output; each study keeps
@@ -684,5 +704,6 @@ def compare(
         max_refits=max_refits,
         draws_per_chain=draws,
         say=(lambda _: None) if quiet else click.echo,
+        catalogue=catalogue,
     )
-    click.echo(comparison_text(result.table, result.notes, result.files))
+    click.echo(comparison_text(result.table, result.notes, result.files, result.warnings))

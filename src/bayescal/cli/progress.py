@@ -486,12 +486,16 @@ def _band(row: Any, column: str) -> str:
     return f"{value:.3f}±{se:.3f}" if se == se else f"{value:.3f}"
 
 
-def comparison_text(table: Any, notes: Sequence[str], files: Mapping[str, Any]) -> str:
-    """The ranking of ``bayescal compare``: table, verdicts, notes and the files written."""
+def comparison_text(
+    table: Any, notes: Sequence[str], files: Mapping[str, Any], warnings: Sequence[str] = ()
+) -> str:
+    """The ranking of ``bayescal compare``: loud warnings, table, verdicts, notes and the
+    files written."""
     from bayescal.report.compare import (
         SMALL_DIFFERENCE,
         diagnostics_mark,
         failed_diagnostics,
+        model_mark,
         verdict,
     )
 
@@ -500,7 +504,8 @@ def comparison_text(table: Any, notes: Sequence[str], files: Mapping[str, Any]) 
         f"{'rank':>4}  {'variant':<{width}}{'ELPD':>11}{'SE':>8}{'diff':>10}{'SE diff':>9}"
         f"{'p_loo':>8}{'k>0.7':>7}{'refits':>7}{'band95':>14}{'band50':>14}  MCMC"
     )
-    lines = [
+    lines = [f"WARNING: {w}" for w in warnings]
+    lines += [
         f"leave-one-period-out ELPD over {int(table['periods'].iloc[0])} training periods "
         "(log density of the measurements in their units, nats; higher is better):",
         head,
@@ -515,7 +520,8 @@ def comparison_text(table: Any, notes: Sequence[str], files: Mapping[str, Any]) 
         )
     lines.append("")
     lines += [
-        f"{r['variant']}: {verdict(r['elpd_diff'], r['se_diff'])}{diagnostics_mark(r)}"
+        f"{r['variant']}: {verdict(r['elpd_diff'], r['se_diff'])}{model_mark(r)}"
+        f"{diagnostics_mark(r)}"
         for _, r in table.iterrows()
     ]
     lines.append(

@@ -65,6 +65,9 @@ def _type_name(param: click.Parameter) -> str:
 def _default(param: click.Parameter, ctx: click.Context) -> str:
     """The default shown in the tables; empty where there is none to show."""
     value = param.get_default(ctx, call=False)
+    if isinstance(param, click.Option) and param.secondary_opts and isinstance(value, bool):
+        # an on/off pair (--x/--no-x): the one in force without either
+        return f"`{(param.opts if value else param.secondary_opts)[0]}`"
     if isinstance(value, bool) or not isinstance(value, str | int | float | Path):
         return ""
     return f"`{value}`"
@@ -73,6 +76,8 @@ def _default(param: click.Parameter, ctx: click.Context) -> str:
 def _option_name(param: click.Option) -> str:
     names = sorted(param.opts, key=lambda o: (not o.startswith("--"), o))
     text = ", ".join(f"`{n}`" for n in names)
+    if param.secondary_opts:
+        text += " / " + ", ".join(f"`{n}`" for n in param.secondary_opts)
     if param.metavar:
         text += f" `{param.metavar}`"
     return text

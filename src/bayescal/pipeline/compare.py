@@ -26,6 +26,15 @@ discrepancy on or off, another standardisation). :func:`compare`
    every variant), ``compare.png`` (:func:`bayescal.report.compare.plot_comparison`)
    and ``compare.md`` (a summary page).
 
+With ``catalogue`` (the default) the *catalogue model* is ranked beside them
+(:mod:`bayescal.pipeline.catalogue`): every calibrated parameter at its nominal
+value, the error model fitted on the same emulator, one row per distinct error
+model; where it is at least as good as the best calibrated variant of its error
+model (ahead, or less than one SE of the paired difference behind), the
+comparison says loudly that calibration does not improve on the catalogue
+values (``Comparison.warnings``, first in ``compare.md``). One study is then
+enough to compare.
+
 Only the training periods' measurements are read: the test window is left for
 the final metrics of the variant chosen.
 """
@@ -34,32 +43,24 @@ from __future__ import annotations
 
 import math
 from collections import Counter
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Collection, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 import pandas as pd
 
 from bayescal.atomic import atomic_write_text
-from bayescal.calibration.cv import (
-    CONFIDENTLY_WRONG,
-    PeriodScores,
-    leave_period_out,
-    paired_difference,
-    refit_period,
-)
+from bayescal.calibration.cv import CONFIDENTLY_WRONG, PeriodScores, paired_difference
 from bayescal.config import Study, load_study
 from bayescal.config.outputs import OutputError
 from bayescal.errors import BayescalError, ConfigError
-from bayescal.mcmc.diagnostics import Diagnostics
+from bayescal.pipeline import catalogue as cat
 from bayescal.pipeline.budget import estimate_time, format_seconds
-from bayescal.pipeline.keys import digest, stage_keys
 from bayescal.pipeline.run import Results, run
+from bayescal.pipeline.scores import relative_jacobian, score_calibration
 from bayescal.pipeline.stages import Context, Options, prepare
 from bayescal.report.compare import comparison_markdown, plot_comparison
-from bayescal.store import crossval as crossval_store
 
 __all__ = [
     "DEFAULT_MAX_REFITS",
@@ -67,6 +68,7 @@ __all__ = [
     "Comparison",
     "Variant",
     "compare",
+    "relative_jacobian",
     "same_training_data",
 ]
 
@@ -108,17 +110,26 @@ class Variant:
     scores: PeriodScores
     settings: dict[str, str] = field(default_factory=dict)
     diagnostics: tuple[str, ...] = ()
+    catalogue_of: str = ""
+
+    @property
+    def model(self) -> str:
+        """``"catalogue"`` (the nominal values, :mod:`bayescal.pipeline.catalogue`) or
+        ``"calibrated"``."""
+        return "catalogue" if self.catalogue_of else "calibrated"
 
 
 @dataclass(frozen=True)
 class Comparison:
-    """The ranking (best first), the per-period table, notes and the files written."""
+    """The ranking (best first), the per-period table, notes, the files written and the
+    loud warnings (a catalogue row at least as good as the calibrated variants)."""
 
     variants: tuple[Variant, ...]
     table: pd.DataFrame
     periods: pd.DataFrame
     notes: tuple[str, ...]
     files: dict[str, Path]
+    warnings: tuple[str, ...] = ()
 
 
 def _labels(studies: Sequence[Study]) -> list[str]:
@@ -209,15 +220,6 @@ def _first_difference(la: str, ca: Context, lb: str, cb: Context) -> str | None:
     return None
 
 
-def _bar(
-    options: Options, label: str, total: int
-) -> tuple[Callable[[int], None] | None, Callable[[], Any]]:
-    factory = options.mcmc_progress
-    if factory is None:
-        return None, lambda: None
-    return factory(label, total)
-
-
 def _calibrated(label: str, study: Study, options: Options, say: Say) -> Results:
     try:
         res = run(study, until="calibrate", options=options, say=lambda t: say(f"{label}: {t}"))
@@ -234,85 +236,12 @@ def _score(
     draws_per_chain: int,
     say: Say,
 ) -> PeriodScores:
-    ctx = res.context
     em, post = res.emulator, res.posterior
     if em is None or post is None:  # pragma: no cover - run(until="calibrate") gives both
         raise ConfigError(f"{label}: the calibrate stage did not finish")
-    obs = em.assembled.observations
-    algebra = ctx.study.emulator.algebra
-    # scores of a discrepancy over the conditions became kriged (2026-11-27): a new key
-    marker = ("discrepancy kriged",) if obs.delta_over_conditions else ()
-    key = digest("leave-period-out", stage_keys(ctx)["calibrate"], draws_per_chain, *marker)
-    path = ctx.out / crossval_store.FILE
-    scores = crossval_store.load_scores(path, key)
-    if scores is None:
-        tick, close = _bar(options, f"{label}: leave-period-out", obs.y_star.shape[1])
-        try:
-            scores = leave_period_out(
-                em.emulator,
-                obs,
-                post,
-                algebra=algebra,
-                draws_per_chain=draws_per_chain,
-                callback=tick,
-            )
-        finally:
-            close()
-        crossval_store.save_scores(scores, path, key)
-    else:
-        say(f"{label}: leave-period-out scores up to date, reused ({path.name})")
-    todo = scores.refit_order()[: max(0, max_refits - int(np.sum(scores.refitted)))]
-    cal = ctx.study.calibration
-    for i in todo:
-        total = cal.chains * (cal.burn + cal.samples)
-        tick, close = _bar(options, f"{label}: refit without period {i}", total)
-        try:
-            value, refit, pit = refit_period(
-                em.emulator,
-                obs,
-                dict(post.priors),
-                i,
-                n_chains=cal.chains,
-                n_burn=cal.burn,
-                n_draws=cal.samples,
-                seed=ctx.seed(f"leave-period-out-{i}"),
-                backend=ctx.options.chains_backend,  # type: ignore[arg-type]
-                algebra=algebra,
-                draws_per_chain=draws_per_chain,
-                callback=tick,
-                moves=cal.moves,
-            )
-        finally:
-            close()
-        scores = scores.with_refits({i: value}, _refit_note(i, refit.diagnostics), {i: pit})
-        crossval_store.save_scores(scores, path, key)
-    return scores.shifted(relative_jacobian(ctx))
-
-
-def relative_jacobian(ctx: Context) -> np.ndarray:
-    """Per training period ``(m*,)``: the log-Jacobian of the outputs with relative errors.
-
-    Their scores are densities of ``log(y + floor)``; adding ``-sum log(y + floor)``
-    over a period's samples makes them densities of the measurements in their own
-    units, comparable with a variant's absolute errors (zero without relative errors).
-    """
-    layout = ctx.measured.layout
-    out = np.zeros(layout.m_star)
-    for name, level in ctx.transforms.items():
-        train = layout.cut(np.asarray(ctx.measured.outputs[name], dtype=float))
-        out += level.log_jacobian(train).sum(axis=0)
-    return out
-
-
-def _refit_note(period: int, diag: Diagnostics) -> list[str]:
-    """One line for a refit whose chains raised diagnostic warnings, else none."""
-    if diag.ok:
-        return []
-    return [
-        f"the refit without period {period} has {len(diag.warnings)} diagnostic warning(s) "
-        f"(largest R-hat {np.nanmax(diag.rhat):.3f}, smallest bulk ESS "
-        f"{np.nanmin(diag.ess_bulk):.0f}); longer [calibration] chains make its value firmer"
-    ]
+    return score_calibration(
+        label, res.context, em, post, options, max_refits, draws_per_chain, say
+    )
 
 
 def _tables(variants: Sequence[Variant], times: list[str]) -> tuple[pd.DataFrame, pd.DataFrame]:
@@ -326,6 +255,7 @@ def _tables(variants: Sequence[Variant], times: list[str]) -> tuple[pd.DataFrame
             {
                 "rank": rank,
                 "variant": v.label,
+                "model": v.model,
                 "elpd": s.elpd,
                 "se": s.se,
                 "elpd_diff": diff,
@@ -343,6 +273,7 @@ def _tables(variants: Sequence[Variant], times: list[str]) -> tuple[pd.DataFrame
                 "diagnostics": "failed" if v.diagnostics else "passed",
                 "diagnostic_warnings": len(v.diagnostics),
                 **v.settings,
+                "catalogue_of": v.catalogue_of,
                 "study": str(v.study.path),
             }
         )
@@ -444,13 +375,15 @@ def compare(
     max_refits: int = DEFAULT_MAX_REFITS,
     draws_per_chain: int = 250,
     say: Say | None = None,
+    catalogue: bool = True,
 ) -> Comparison:
     """Rank the variants ``paths`` by leave-one-period-out ELPD and write the comparison.
 
     Parameters
     ----------
     paths
-        Study files or folders, two or more.
+        Study files or folders, two or more (one is enough with ``catalogue``:
+        the study against its catalogue model).
     output
         Folder for ``compare.csv``, ``compare-periods.csv``, ``compare.png``
         and ``compare.md`` (created if missing).
@@ -464,21 +397,30 @@ def compare(
         Posterior draws per chain the scores use (thinned evenly).
     say
         Receives one-line progress notes.
+    catalogue
+        Also rank the catalogue model (every parameter at its nominal value, the
+        error model fitted; :mod:`bayescal.pipeline.catalogue`), one row per
+        distinct error model among the variants, and say loudly
+        (``Comparison.warnings``) where it is at least as good as the best
+        calibrated variant of its error model.
 
     Raises
     ------
     ConfigError
-        Fewer than two studies, the same study twice, a study not found, or
+        Fewer than two studies (none with ``catalogue``), the same study twice,
+        a study not found, or
         variants that do not share their training measurements.
     BayescalError
         A study's stages up to ``calibrate`` failed (its label first).
     """
     note = say or (lambda _: None)
     opts = options or Options()
-    if len(paths) < 2:
+    if len(paths) < (1 if catalogue else 2):
+        least = "one study" if catalogue else "two studies"
         raise ConfigError(
-            f"compare needs at least two studies to rank, got {len(paths)}",
-            hint="give the study folders of the variants: bayescal compare A B ...",
+            f"compare needs at least {least} to rank, got {len(paths)}",
+            hint="give the study folders of the variants: bayescal compare A B ... "
+            "(one study is ranked against its catalogue model unless --no-catalogue)",
         )
     if max_refits < 0 or draws_per_chain < 1:
         raise ConfigError("max_refits must be >= 0 and draws_per_chain >= 1")
@@ -493,7 +435,10 @@ def compare(
     contexts = [(label, prepare(s, opts)) for label, s in zip(labels, studies, strict=True)]
     for other in contexts[1:]:
         same_training_data(contexts[0], other)
-    note(_cost(contexts, max_refits))
+    sources = cat.catalogue_labels(labels, [_settings(s)["error_model"] for s in studies])
+    if not catalogue:
+        sources = {}
+    note(_cost(contexts, max_refits, sources))
     variants = []
     for k, (label, study) in enumerate(zip(labels, studies, strict=True), start=1):
         note(f"variant {k} of {len(studies)}: {label}")
@@ -506,34 +451,82 @@ def compare(
         )
         failed = res.posterior.warnings if res.posterior is not None else ()
         variants.append(Variant(label, study, scores, _settings(study), tuple(failed)))
+        if k - 1 in sources:
+            variants.append(
+                _catalogue(
+                    sources[k - 1], variants[-1], res, opts, max_refits, draws_per_chain, note
+                )
+            )
     first = contexts[0][1].measured
     times = [_when(first.times, int(s)) for s in first.layout.train_starts]
     table, periods = _tables(variants, times)
-    notes = _notes(variants, max_refits)
-    files = _write(folder, table, periods, notes, {v.label: v.scores.pit for v in variants})
+    loud, margins = cat.catalogue_warnings(
+        [
+            cat.Scored(v.label, v.scores.pointwise, v.settings["error_model"], v.catalogue_of)
+            for v in variants
+        ]
+    )
+    notes = margins + _notes(variants, max_refits)
+    pits = {v.label: v.scores.pit for v in variants}
+    files = _write(folder, table, periods, notes, pits, loud)
     order = {label: k for k, label in enumerate(table["variant"])}
     ranked = tuple(sorted(variants, key=lambda v: order[v.label]))
-    return Comparison(ranked, table, periods, tuple(notes), files)
+    return Comparison(ranked, table, periods, tuple(notes), files, tuple(loud))
 
 
-def _cost(contexts: Sequence[tuple[str, Context]], max_refits: int) -> str:
+def _catalogue(
+    label: str,
+    source: Variant,
+    res: Results,
+    options: Options,
+    max_refits: int,
+    draws_per_chain: int,
+    say: Say,
+) -> Variant:
+    """The catalogue row of ``source``'s error model, on its emulator."""
+    if res.emulator is None:  # pragma: no cover - run(until="calibrate") gives it
+        raise ConfigError(f"{source.label}: the emulator stage did not finish")
+    ctx, em = res.context, res.emulator
+    say(f"{label}: the nominal values with the error model of {source.label}")
+    scores, failed = cat.score_catalogue(label, ctx, em, options, max_refits, draws_per_chain, say)
+    say(
+        f"{label}: ELPD {scores.elpd:.1f} ± {scores.se:.1f} over {scores.n_periods} periods "
+        f"({int(np.sum(scores.high_k))} with Pareto k > 0.7, {int(np.sum(scores.refitted))} "
+        "refitted)"
+    )
+    settings = cat.catalogue_settings(ctx, em, source.settings)
+    return Variant(label, source.study, scores, settings, failed, catalogue_of=source.label)
+
+
+def _cost(
+    contexts: Sequence[tuple[str, Context]], max_refits: int, catalogues: Collection[int] = ()
+) -> str:
     """What the comparison may cost, from each variant's sizes (:func:`estimate_time`):
     its emulator and calibration where its output folder does not hold them yet, and
-    up to ``max_refits`` refits, each about one calibration."""
+    up to ``max_refits`` refits, each about one calibration; a catalogue model on the
+    emulator of the variants ``catalogues`` costs about one calibration and its refits."""
     total = 0.0
     parts = []
-    for label, ctx in contexts:
+    for k, (label, ctx) in enumerate(contexts):
         estimate = estimate_time(ctx.study, ctx.measured)
         stages = {part.what: part.seconds for part in estimate.parts}
         calibration = stages.get("calibration", 0.0)
         first = stages.get("emulator", 0.0) + calibration
         total += first + max_refits * calibration
+        if k in catalogues:
+            total += (1 + max_refits) * calibration
         parts.append(
             f"{label} {format_seconds(first)} + up to {max_refits} refits of "
             f"{format_seconds(calibration)}"
         )
+    extra = (
+        f" and {len(catalogues)} catalogue model(s) (the error model at the nominal values: "
+        "about one calibration each, and its refits)"
+        if catalogues
+        else ""
+    )
     return (
-        f"compare: {len(contexts)} variants, up to about {format_seconds(total)} of MCMC "
+        f"compare: {len(contexts)} variants{extra}, up to about {format_seconds(total)} of MCMC "
         f"and emulator training besides the simulator runs ({'; '.join(parts)}; stages "
         "already in a study's output folder are reused, refits only where a period's "
         "Pareto k exceeds 0.7): an order of magnitude from the studies' sizes"
@@ -546,6 +539,7 @@ def _write(
     periods: pd.DataFrame,
     notes: list[str],
     pits: dict[str, np.ndarray],
+    warnings: list[str] | None = None,
 ) -> dict[str, Path]:
     try:
         folder.mkdir(parents=True, exist_ok=True)
@@ -554,7 +548,7 @@ def _write(
             "periods": atomic_write_text(folder / FILES["periods"], periods.to_csv(index=False)),
             "figure": plot_comparison(folder / FILES["figure"], table, periods, pits),
         }
-        text = comparison_markdown(table, periods, notes, FILES["figure"])
+        text = comparison_markdown(table, periods, notes, FILES["figure"], warnings or [])
         files["summary"] = atomic_write_text(folder / FILES["summary"], text)
     except OSError as exc:
         raise ConfigError(f"cannot write into {folder}: {exc.strerror or exc}") from None

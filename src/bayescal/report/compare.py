@@ -18,11 +18,14 @@ from matplotlib.axes import Axes
 from bayescal.report.figures import save_figure
 
 __all__ = [
+    "CATALOGUE_TEXT",
     "SMALL_DIFFERENCE",
     "TEST_WINDOW_TEXT",
     "comparison_markdown",
     "diagnostics_mark",
     "failed_diagnostics",
+    "is_catalogue",
+    "model_mark",
     "plot_comparison",
     "verdict",
 ]
@@ -36,6 +39,28 @@ TEST_WINDOW_TEXT = (
     "read by none of it; it is read only for the final metrics of the chosen variant "
     "(`bayescal run`, the report)."
 )
+
+
+CATALOGUE_TEXT = (
+    "A catalogue row is the nominal (catalogue) model: every calibrated parameter held at "
+    "its nominal value of the study file, the error model of the variant named fitted as "
+    "in its calibration, on that variant's emulator, and scored the same way. A calibrated "
+    "variant that does not beat it by more than one SE of the paired difference predicts "
+    "the left-out periods no better than the catalogue values."
+)
+
+
+def is_catalogue(row: pd.Series) -> bool:
+    """Whether a ranking row is a catalogue model (the ``model`` column; ``False`` for
+    tables from before it)."""
+    return str(row.get("model", "calibrated")) == "catalogue"
+
+
+def model_mark(row: pd.Series) -> str:
+    """What follows a catalogue row's verdict: what it is (``""`` for a calibrated one)."""
+    if not is_catalogue(row):
+        return ""
+    return f" [catalogue: the nominal values, error model of {row.get('catalogue_of', '?')}]"
 
 
 def failed_diagnostics(row: pd.Series) -> bool:
@@ -94,7 +119,11 @@ def plot_comparison(
         _plot_pits(axes[2], shown, order)
     y = np.arange(n)[::-1].astype(float)
     best = float(table["elpd"].iloc[0])
-    left.errorbar(table["elpd"], y, xerr=table["se"], fmt="o", color="black", capsize=3)
+    nominal = np.array([is_catalogue(row) for _, row in table.iterrows()], dtype=bool)
+    for mask, fmt, colour in ((~nominal, "o", "black"), (nominal, "s", "tab:blue")):
+        if mask.any():
+            left.errorbar(table["elpd"][mask], y[mask], xerr=table["se"][mask], fmt=fmt,
+                          color=colour, capsize=3)  # fmt: skip
     others = table.iloc[1:]
     if len(others):
         left.errorbar(
@@ -107,6 +136,10 @@ def plot_comparison(
         )
     left.axvline(best, color="0.3", ls="--", lw=0.8)
     left.set_yticks(y, order)
+    for tick, flag in zip(left.get_yticklabels(), nominal, strict=True):
+        if flag:  # the catalogue rows: blue squares, labels in italics
+            tick.set_color("tab:blue")
+            tick.set_fontstyle("italic")
     left.set_ylim(-0.7, n - 0.3)
     left.set_xlabel("ELPD: leave-one-period-out log density [nats]")
     left.set_title("higher is better", fontsize=9)
@@ -162,12 +195,18 @@ def _cell(value: object, column: str = "", row: pd.Series | None = None) -> str:
 
 
 def comparison_markdown(
-    table: pd.DataFrame, periods: pd.DataFrame, notes: list[str], figure: str | None
+    table: pd.DataFrame,
+    periods: pd.DataFrame,
+    notes: list[str],
+    figure: str | None,
+    warnings: list[str] | None = None,
 ) -> str:
-    """A short Markdown page: the ranking table, verdicts, notes and the figure."""
+    """A short Markdown page: the loud warnings, the ranking table, verdicts, notes and
+    the figure."""
     columns = {
         "rank": "rank",
         "variant": "variant",
+        "model": "model",
         "elpd": "ELPD",
         "se": "SE",
         "elpd_diff": "ELPD diff",
@@ -185,9 +224,9 @@ def comparison_markdown(
         "standardise": "standardise",
     }
     shown = [c for c in columns if c in table.columns]
-    lines = [
-        "# Leave-one-period-out comparison",
-        "",
+    lines = ["# Leave-one-period-out comparison", ""]
+    lines += [f"**WARNING: {w}**\n" for w in warnings or []]
+    lines += [
         f"{len(table)} variants ranked by ELPD, the expected log density of a left-out "
         f"training period's measurements in their own units (nats, higher is better), summed "
         f"over the {int(table['periods'].iloc[0])} training periods. ELPD diff is the "
@@ -204,7 +243,7 @@ def comparison_markdown(
         lines.append("| " + " | ".join(cells.values()) + " |")
     lines += ["", "## Reading it", ""]
     for _, row in table.iterrows():
-        said = verdict(row["elpd_diff"], row["se_diff"]) + diagnostics_mark(row)
+        said = verdict(row["elpd_diff"], row["se_diff"]) + model_mark(row) + diagnostics_mark(row)
         lines.append(f"- **{row['variant']}**: {said}")
     lines += [
         "",
@@ -227,6 +266,8 @@ def comparison_markdown(
         "",
         TEST_WINDOW_TEXT,
     ]
+    if "model" in table.columns and (table["model"] == "catalogue").any():
+        lines += ["", CATALOGUE_TEXT]
     if notes:
         lines += ["", "## Notes", ""] + [f"- {n}" for n in notes]
     if figure:
