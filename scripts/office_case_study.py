@@ -32,10 +32,12 @@ import json
 import shutil
 import sys
 import time
+import tomllib
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
+import tomli_w
 
 from bayescal.cli.progress import screening_text
 from bayescal.config import load_study
@@ -97,6 +99,21 @@ def guideline14(study_dir: Path) -> pd.DataFrame:
     return frame.set_index("output")
 
 
+def _few_runs(path: Path) -> None:
+    """Switch a fresh copy of the office study to the settings of ``--few-runs``."""
+    data = tomllib.loads(path.read_text(encoding="utf-8"))
+    data["screening"] = {
+        "method": "sobol",
+        "runs": 42,
+        "statistic": "mean",
+        "threshold": 0.0225,
+        "max_parameters": 8,
+    }
+    data["design"] = {"runs": 24, "sequential": True, "batch": 12, "max_runs": 72}
+    data["predict"] = {**data["predict"], "method": "auto"}
+    path.write_text(tomli_w.dumps(data), encoding="utf-8")
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--out", type=Path, default=REPO / "out" / "case-studies" / "office")
@@ -105,12 +122,21 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--backend", choices=["processes", "dask"], default=None)
     parser.add_argument("--scheduler", default=None, help="Dask scheduler address")
     parser.add_argument("--markdown", action="store_true", help="print Markdown tables")
+    parser.add_argument(
+        "--few-runs",
+        action="store_true",
+        help="issue 36's settings: Sobol screening on a Latin hypercube of 2 x 21 runs "
+        "(threshold 0.0225 = 0.15 squared), a sequential design (24 first runs, batches of "
+        "12, at most 72) and [predict] method = 'auto'",
+    )
     args = parser.parse_args(argv)
     folder: Path = args.out
     if args.fresh and folder.exists():
         shutil.rmtree(folder)
     if not (folder / "study.toml").is_file():
         copy_example("office", folder)
+        if args.few_runs:
+            _few_runs(folder / "study.toml")
     options = Options(backend=args.backend, jobs=args.jobs, scheduler=args.scheduler)
     start = time.perf_counter()
     screened = screen(load_study(folder), options=options, apply=True, say=print)
@@ -133,6 +159,8 @@ def main(argv: list[str] | None = None) -> int:
     print(sizes)
     print("times [s]: " + ", ".join(f"{k} {v:.1f}" for k, v in times.items()))
     print(f"end to end (this invocation): {total:.1f} s")
+    made = len(list((res.context.out / "simulations" / "runs").glob("*.npz")))
+    print(f"EnergyPlus runs in the cache (every run made, the nominal one included): {made}")
     truth = posterior_vs_truth(folder)
     g14 = guideline14(folder)
     if args.markdown:
