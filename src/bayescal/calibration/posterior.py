@@ -335,6 +335,7 @@ def calibrate(
     moves: Moves = "gibbs",
     max_draws: int | None = None,
     on_extend: Callable[[int, int], Callable[[int], None] | None] | None = None,
+    starts: ArrayLike | None = None,
 ) -> Posterior:
     """Sample theta*, lambda and lambda* (eq. 16) with the hyperparameters at the MAP.
 
@@ -399,6 +400,14 @@ def calibrate(
         Called as ``on_extend(kept, longer)`` before each extension; it may
         return a new progress callback for the extension (else ``callback``
         keeps counting).
+    starts
+        Where the chains' theta* start, ``(n_chains, t)`` on the normalised
+        scale [0, 1] of the bounds (e.g. draws of a previous posterior:
+        :func:`bayescal.pipeline.sequential.warm_starts`); a NaN entry keeps
+        the default start of that coordinate. Values are clipped into
+        ``[START_MARGIN, 1 - START_MARGIN]``, inside every prior's support. The
+        precisions (and AR(1) coefficients, discrepancy variances) start as by
+        default. ``None`` (default): dispersed starts (:func:`default_starts`).
 
     Returns
     -------
@@ -438,10 +447,10 @@ def calibrate(
             "coefficient(s)",
             hint="use sampler 'mwg'",
         )
-    starts = default_starts(target, n_chains, seed)
+    x0 = warm(default_starts(target, n_chains, seed), starts, target.t)
     if sampler == "nuts":
         return _calibrate_nuts(
-            target, starts, prior_map, assembled.parameter_names, n_burn, n_draws, seed, callback
+            target, x0, prior_map, assembled.parameter_names, n_burn, n_draws, seed, callback
         )
     most = n_draws if max_draws is None else int(max_draws)
     if most < n_draws:
@@ -470,7 +479,7 @@ def calibrate(
                 callback=callback,
                 checkpoint_dir=checkpoint_dir,
                 checkpoint_seconds=checkpoint_seconds,
-                starts=starts,
+                starts=x0,
                 moves=moves,
             )
             post = _built(chains, target, prior_map, assembled, seed, algebra, observations)
@@ -482,6 +491,29 @@ def calibrate(
             assert checkpoint_dir is not None  # a temporary folder where none was given
             atomic_write_json(Path(checkpoint_dir) / EXTENSION_FILE, plan | {"kept": longer})
             kept = longer
+
+
+#: How far inside [0, 1] given starts are clipped (a prior's density may vanish on the bounds).
+START_MARGIN = 1e-6
+
+
+def warm(default: FloatArray, starts: ArrayLike | None, t: int) -> FloatArray:
+    """The starting points ``default`` with theta* (its first ``t`` columns) replaced by
+    ``starts`` where given: ``(chains, t)`` on the normalised scale; NaN keeps the default.
+    """
+    if starts is None:
+        return default
+    given = np.asarray(starts, dtype=float)
+    n_chains = default.shape[0]
+    if given.shape != (n_chains, t):
+        raise ConfigError(
+            f"starts must be (chains, t) = ({n_chains}, {t}) on the normalised scale, "
+            f"got shape {given.shape}"
+        )
+    out = default.copy()
+    clipped = np.clip(given, START_MARGIN, 1.0 - START_MARGIN)
+    out[:, :t] = np.where(np.isnan(given), default[:, :t], clipped)
+    return out
 
 
 EXTENSION_FILE = "extension.json"
