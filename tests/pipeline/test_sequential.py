@@ -1,8 +1,8 @@
 """A posterior as the next prior: ``[study] prior_from`` and ``bayescal update``.
 
 A virtual wall record of 14 days (the built-in wall at a known truth, white
-noise): the study is calibrated on its first eight days, then ``update`` adds
-the rest with the first posterior as prior.
+noise; :mod:`sequential_study`): the study is calibrated on its first eight
+days, then ``update`` adds the rest with the first posterior as prior.
 """
 
 from __future__ import annotations
@@ -25,23 +25,7 @@ from bayescal.errors import BayescalError, ConfigError
 from bayescal.pipeline import Options, load_results, run, sequential
 from bayescal.pipeline.sequential import prior_from_draws, warm_starts
 from bayescal.pipeline.update import HISTORY_FILE, reuse_runs, runs_line, update, update_files
-from compare_study import STUDY
-from virtual_wall import virtual_experiment
-
-TRUTH = {"k_cb": 0.124, "cp_cb": 845.41, "cp_fb": 840.0}
-
-
-def _record() -> pd.DataFrame:
-    ve = virtual_experiment(seed=5, truth=TRUTH, runs=5, periods=13, warmup_days=1, test_days=0)
-    times = pd.date_range("2012-02-01", periods=ve.layout.n_total, freq="30min")
-    return pd.DataFrame(
-        {
-            "time": times.strftime("%Y-%m-%dT%H:%M:%S"),
-            "T_se": np.round(ve.boundary["temp_surf_out"], 6),
-            "T_si": np.round(ve.boundary["temp_surf_in"], 6),
-            "q_si": np.round(ve.measured["heat_flux_in"], 6),
-        }
-    )
+from sequential_study import END, write_study
 
 
 def _moments(posterior: Any, k: int) -> tuple[float, float]:
@@ -49,15 +33,8 @@ def _moments(posterior: Any, k: int) -> tuple[float, float]:
     return float(draws.mean()), float(draws.std())
 
 
-def _study(folder: Path, end: str | None = "2012-02-09T00:00", extra: str = "") -> Path:
-    folder.mkdir(parents=True, exist_ok=True)
-    _record().to_csv(folder / "wall.csv", index=False)
-    text = STUDY.format(name=folder.name, model="white")
-    if end is not None:
-        text = text.replace('time_zone = "UTC"\n', f'time_zone = "UTC"\nend = "{end}"\n')
-    text = text.replace("seed = 11\n", "seed = 11\n" + extra)
-    (folder / "study.toml").write_text(text, encoding="utf-8")
-    return folder
+def _study(folder: Path, end: str | None = END, extra: str = "") -> Path:
+    return write_study(folder, end, extra)
 
 
 @pytest.fixture(scope="module")

@@ -256,8 +256,8 @@ def update(
     tell(
         f"update {k}: the record from {raw['data']['start']} on, with the posterior of "
         f"{Path(previous.path or '').name} as prior; the calibration chains start from its "
-        f"draws, burn-in kept at {changed.calibration.burn} sweeps (a shorter one was "
-        "measured no better converged)"
+        f"draws; burn-in kept at {changed.calibration.burn} sweeps (a warm start was measured "
+        "not to converge sooner: the burn-in adapts the proposal widths)"
     )
     tell(runs_line(previous, changed))
     run_pipeline(changed, options=options, say=tell)
