@@ -18,6 +18,7 @@ import numpy as np
 import pytest
 from scipy import integrate, special, stats
 
+from bayescal.calibration.posterior import START_MARGIN, warm
 from bayescal.calibration.priors import ThetaPriors
 from bayescal.calibration.target import CalibrationPosterior
 from bayescal.design import (
@@ -118,3 +119,16 @@ def test_the_spec_round_trip_keeps_the_joint() -> None:
     assert again == prior
     assert isinstance(again, PosteriorPrior)
     assert again.joint == JOINT
+
+
+def test_given_starts_replace_theta_only_clipped_inside_the_bounds() -> None:
+    default = np.arange(12.0).reshape(3, 4) / 20.0
+    given = np.array([[0.0, 0.3], [1.2, np.nan], [0.5, 0.7]])
+    got = warm(default, given, 2)
+    np.testing.assert_array_equal(got[:, 2:], default[:, 2:])  # the precisions as by default
+    np.testing.assert_array_equal(
+        got[:, :2], [[START_MARGIN, 0.3], [1 - START_MARGIN, default[1, 1]], [0.5, 0.7]]
+    )
+    assert warm(default, None, 2) is default
+    with pytest.raises(ConfigError, match="starts must be"):
+        warm(default, given[:2], 2)

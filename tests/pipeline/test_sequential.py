@@ -1,8 +1,8 @@
 """A posterior as the next prior: ``[study] prior_from`` and ``bayescal update``.
 
 A virtual wall record of 14 days (the built-in wall at a known truth, white
-noise): the study is calibrated on its first eight days, then ``update`` adds
-the rest with the first posterior as prior.
+noise; :mod:`sequential_study`): the study is calibrated on its first eight
+days, then ``update`` adds the rest with the first posterior as prior.
 """
 
 from __future__ import annotations
@@ -22,26 +22,10 @@ from bayescal.cli import main
 from bayescal.config import load_study
 from bayescal.design import PosteriorPrior
 from bayescal.errors import BayescalError, ConfigError
-from bayescal.pipeline import Options, load_results, run
-from bayescal.pipeline.sequential import prior_from_draws
-from bayescal.pipeline.update import HISTORY_FILE, update, update_files
-from compare_study import STUDY
-from virtual_wall import virtual_experiment
-
-TRUTH = {"k_cb": 0.124, "cp_cb": 845.41, "cp_fb": 840.0}
-
-
-def _record() -> pd.DataFrame:
-    ve = virtual_experiment(seed=5, truth=TRUTH, runs=5, periods=13, warmup_days=1, test_days=0)
-    times = pd.date_range("2012-02-01", periods=ve.layout.n_total, freq="30min")
-    return pd.DataFrame(
-        {
-            "time": times.strftime("%Y-%m-%dT%H:%M:%S"),
-            "T_se": np.round(ve.boundary["temp_surf_out"], 6),
-            "T_si": np.round(ve.boundary["temp_surf_in"], 6),
-            "q_si": np.round(ve.measured["heat_flux_in"], 6),
-        }
-    )
+from bayescal.pipeline import Options, load_results, run, sequential
+from bayescal.pipeline.sequential import prior_from_draws, warm_starts
+from bayescal.pipeline.update import HISTORY_FILE, reuse_runs, runs_line, update, update_files
+from sequential_study import END, write_study
 
 
 def _moments(posterior: Any, k: int) -> tuple[float, float]:
@@ -49,15 +33,8 @@ def _moments(posterior: Any, k: int) -> tuple[float, float]:
     return float(draws.mean()), float(draws.std())
 
 
-def _study(folder: Path, end: str | None = "2012-02-09T00:00", extra: str = "") -> Path:
-    folder.mkdir(parents=True, exist_ok=True)
-    _record().to_csv(folder / "wall.csv", index=False)
-    text = STUDY.format(name=folder.name, model="white")
-    if end is not None:
-        text = text.replace('time_zone = "UTC"\n', f'time_zone = "UTC"\nend = "{end}"\n')
-    text = text.replace("seed = 11\n", "seed = 11\n" + extra)
-    (folder / "study.toml").write_text(text, encoding="utf-8")
-    return folder
+def _study(folder: Path, end: str | None = END, extra: str = "") -> Path:
+    return write_study(folder, end, extra)
 
 
 @pytest.fixture(scope="module")
@@ -75,6 +52,12 @@ def test_update_adds_the_new_days_with_the_posterior_as_prior(first: Path, tmp_p
     done = update(study, options=Options(backend="serial"), say=said.append)
     assert [p.name for p in update_files(study)] == ["update-001.toml"]
     assert any("prior of k_cb, cp_cb from the posterior" in line for line in said)
+    assert any("the calibration chains start from its draws" in line for line in said)
+    # the record is cut by data.start / data.end: the runs' boundary conditions are new
+    assert (
+        "runs: re-simulated: the boundary conditions now cover 6 more days and start 6 days "
+        "later" in "\n".join(said)
+    )
     new = load_results(done.study)
     assert new.posterior is not None
     assert all(isinstance(p, PosteriorPrior) for p in new.posterior.priors.values())
@@ -112,6 +95,63 @@ def test_update_adds_the_new_days_with_the_posterior_as_prior(first: Path, tmp_p
     # nothing newer: the record after the last test window is too short for a period
     with pytest.raises(BayescalError):
         update(load_study(folder), options=Options(backend="serial"))
+
+
+def test_warm_started_chains_sample_the_same_posterior_as_cold_ones(
+    first: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A study with ``prior_from`` starts its chains at draws of the previous posterior
+    (different draws, spread from its centre to its tails); the draws after burn-in
+    are the same posterior as from the dispersed default starts: means within four
+    combined Monte Carlo standard errors (ESS-based MCSE of each run), SDs within
+    four combined MCSEs of the SD."""
+    folder = tmp_path / "wall"
+    shutil.copytree(first, folder)
+    done = update(load_study(folder), options=Options(backend="serial"))
+    starts = warm_starts(done.study, 4)
+    assert starts is not None
+    assert starts.shape == (4, 2)
+    assert len({tuple(row) for row in starts}) == 4  # one draw per chain
+    before = load_results(load_study(folder)).posterior
+    assert before is not None
+    unit = before.unit_draws.reshape(-1, 2)
+    for row in starts:  # each start is one of the previous draws
+        assert np.any(np.all(np.isclose(unit, row, rtol=0, atol=1e-12), axis=1))
+    raw = tomllib.loads((folder / "update-001.toml").read_text(encoding="utf-8"))
+    raw["study"]["output_dir"] = "out/cold"
+    (folder / "cold.toml").write_text(tomli_w.dumps(raw), encoding="utf-8")
+    shutil.copytree(folder / "out" / "update-001", folder / "out" / "cold")
+    cold_study = load_study(folder / "cold.toml")
+    monkeypatch.setattr(sequential, "warm_starts", lambda study, n: None)
+    run(cold_study, from_stage="calibrate", until="calibrate", options=Options(backend="serial"))
+    warm = load_results(done.study).posterior
+    cold = load_results(cold_study).posterior
+    assert warm is not None
+    assert cold is not None
+    assert not np.array_equal(warm.unit_draws, cold.unit_draws)
+    a, b = warm.summary(), cold.summary()
+    for name in warm.names:
+        se_mean = float(np.hypot(a.loc[name, "mcse_mean"], b.loc[name, "mcse_mean"]))
+        se_sd = float(np.hypot(a.loc[name, "mcse_sd"], b.loc[name, "mcse_sd"]))
+        assert abs(a.loc[name, "mean"] - b.loc[name, "mean"]) < 4 * se_mean, name
+        assert abs(a.loc[name, "sd"] - b.loc[name, "sd"]) < 4 * se_sd, name
+
+
+def test_runs_with_the_same_boundary_conditions_are_linked(first: Path, tmp_path: Path) -> None:
+    folder = tmp_path / "wall"
+    shutil.copytree(first, folder)
+    raw = tomllib.loads((folder / "study.toml").read_text(encoding="utf-8"))
+    raw["study"]["output_dir"] = "again"
+    (folder / "again.toml").write_text(tomli_w.dumps(raw), encoding="utf-8")
+    study, again = load_study(folder), load_study(folder / "again.toml")
+    line = runs_line(study, again)
+    assert line == f"runs: reused 8 from {folder / 'out' / 'simulations'}"
+    assert len(list((folder / "again" / "simulations" / "runs").glob("*.npz"))) == 8
+    run(again, until="simulate", options=Options(backend="serial"))
+    linked = sorted((folder / "again" / "simulations" / "runs").glob("*.npz"))
+    assert len(linked) == 8  # the design's runs found in the cache, none made again
+    assert all(f.stat().st_nlink == 2 for f in linked)
+    assert reuse_runs(folder / "out" / "simulations", folder / "again" / "simulations") == 8
 
 
 def test_prior_from_refuses_an_unfinished_or_unrelated_study(first: Path, tmp_path: Path) -> None:

@@ -336,6 +336,7 @@ def calibrate(
     max_draws: int | None = None,
     on_extend: Callable[[int, int], Callable[[int], None] | None] | None = None,
     held: Mapping[str, float] | None = None,
+    starts: ArrayLike | None = None,
 ) -> Posterior:
     """Sample theta*, lambda and lambda* (eq. 16) with the hyperparameters at the MAP.
 
@@ -406,6 +407,14 @@ def calibrate(
         chains sample the error model's parameters alone and the draws of
         theta* all equal these values (the catalogue model of ``bayescal
         compare``: the nominal values). ``None`` (default): theta* is sampled.
+    starts
+        Where the chains' theta* start, ``(n_chains, t)`` on the normalised
+        scale [0, 1] of the bounds (e.g. draws of a previous posterior:
+        :func:`bayescal.pipeline.sequential.warm_starts`); a NaN entry keeps
+        the default start of that coordinate. Values are clipped into
+        ``[START_MARGIN, 1 - START_MARGIN]``, inside every prior's support. The
+        precisions (and AR(1) coefficients, discrepancy variances) start as by
+        default. ``None`` (default): dispersed starts (:func:`default_starts`).
 
     Returns
     -------
@@ -448,10 +457,10 @@ def calibrate(
             "coefficient(s)",
             hint="use sampler 'mwg'",
         )
-    starts = default_starts(target, n_chains, seed)
+    x0 = warm(default_starts(target, n_chains, seed), starts, target.t)
     if sampler == "nuts":
         return _calibrate_nuts(
-            target, starts, prior_map, assembled.parameter_names, n_burn, n_draws, seed, callback
+            target, x0, prior_map, assembled.parameter_names, n_burn, n_draws, seed, callback
         )
     most = n_draws if max_draws is None else int(max_draws)
     if most < n_draws:
@@ -480,7 +489,7 @@ def calibrate(
                 callback=callback,
                 checkpoint_dir=checkpoint_dir,
                 checkpoint_seconds=checkpoint_seconds,
-                starts=starts,
+                starts=x0,
                 moves=moves,
                 held=fixed,
             )
@@ -506,6 +515,29 @@ def _held_unit(held: Mapping[str, float], priors: Mapping[str, Prior]) -> FloatA
     if outside:
         raise ConfigError(f"the held value of {outside[0]} lies outside its prior bounds")
     return unit
+
+
+#: How far inside [0, 1] given starts are clipped (a prior's density may vanish on the bounds).
+START_MARGIN = 1e-6
+
+
+def warm(default: FloatArray, starts: ArrayLike | None, t: int) -> FloatArray:
+    """The starting points ``default`` with theta* (its first ``t`` columns) replaced by
+    ``starts`` where given: ``(chains, t)`` on the normalised scale; NaN keeps the default.
+    """
+    if starts is None:
+        return default
+    given = np.asarray(starts, dtype=float)
+    n_chains = default.shape[0]
+    if given.shape != (n_chains, t):
+        raise ConfigError(
+            f"starts must be (chains, t) = ({n_chains}, {t}) on the normalised scale, "
+            f"got shape {given.shape}"
+        )
+    out = default.copy()
+    clipped = np.clip(given, START_MARGIN, 1.0 - START_MARGIN)
+    out[:, :t] = np.where(np.isnan(given), default[:, :t], clipped)
+    return out
 
 
 EXTENSION_FILE = "extension.json"

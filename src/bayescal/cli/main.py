@@ -491,8 +491,10 @@ def update(
     Writes update-00K.toml beside the study file: the study's settings on the
     record from its test window (less one warm-up) to the end of the data,
     with the previous posterior as the prior of its parameters ([study]
-    prior_from), and runs it into OUTPUT_DIR/update-00K. Each update starts from
-    the last finished one; a killed update resumes. Prints and writes
+    prior_from), and runs it into OUTPUT_DIR/update-00K. Its simulator runs are
+    made again (runs are tied to their boundary conditions; one line says why);
+    its calibration chains start from draws of the previous posterior. Each
+    update starts from the last finished one; a killed update resumes. Prints and writes
     OUTPUT_DIR/update-history.csv: how the intervals narrowed, update by update.
     """
     import pandas as pd

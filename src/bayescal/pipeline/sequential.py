@@ -12,6 +12,10 @@ the density fits the draws is measured and stated
 marginal of the draws and the density's marginal; a value above
 :data:`FIT_WARN` is a warning: the posterior is skewed or multi-modal in a way
 one Gaussian in logit space does not follow).
+
+The calibration chains of such a study start from draws of the previous
+posterior (:func:`warm_starts`), one draw per chain, spread from its centre to
+its tails, instead of the dispersed default starts.
 """
 
 from __future__ import annotations
@@ -30,7 +34,7 @@ from bayescal.errors import BayescalError, ConfigError
 from bayescal.store import posterior as posterior_store
 from bayescal.store.stages import StageLog
 
-__all__ = ["FIT_WARN", "PriorFromDraws", "prior_from_draws", "study_priors"]
+__all__ = ["FIT_WARN", "PriorFromDraws", "prior_from_draws", "study_priors", "warm_starts"]
 
 #: Largest Kolmogorov-Smirnov distance of a marginal above which the fit is a warning.
 FIT_WARN = 0.05
@@ -76,14 +80,14 @@ class PriorFromDraws:
         return line
 
 
-def prior_from_draws(study: Study) -> PriorFromDraws | None:
-    """The priors of ``study`` with its ``prior_from`` applied (``None`` without one).
+def _previous(study: Study) -> tuple[Any, Path, str] | None:
+    """The finished posterior ``prior_from`` names, its output folder and the other
+    study's file (``None`` without ``prior_from``).
 
     Raises
     ------
     ConfigError
-        The other study cannot be read, has no finished calibration, shares no
-        parameter, or its posterior reaches this study's bounds.
+        The other study cannot be read or has no finished calibration.
     """
     other_path = study.study.prior_from
     if other_path is None:
@@ -101,15 +105,65 @@ def prior_from_draws(study: Study) -> PriorFromDraws | None:
             f"study.prior_from: {out} holds no finished calibration",
             hint=f"run `bayescal run {other.path}` first",
         )
-    own = study.priors()
     try:
-        previous = _posterior(str(file), file.stat().st_mtime_ns)
+        return _posterior(str(file), file.stat().st_mtime_ns), out, str(other.path)
     except (BayescalError, OSError, ValueError, KeyError) as exc:
         raise ConfigError(f"study.prior_from: cannot read {file} ({exc})") from None
+
+
+def warm_starts(study: Study, n_chains: int) -> np.ndarray | None:
+    """Starts of the calibration chains from the previous posterior's draws.
+
+    ``(n_chains, t)`` on the normalised scale of this study's bounds (the
+    parameters' order), or ``None`` without ``prior_from``. Chain ``k`` starts
+    at the draw whose Mahalanobis distance from the draws' mean (in logit
+    space) is the ``(k + 0.5) / n_chains`` quantile of all distances: the
+    chains start at different draws, from the centre of the previous
+    posterior to its tails. Parameters the previous study does not calibrate
+    are NaN (their default starts). A start on or beyond a bound is clipped
+    inside it by :func:`bayescal.calibration.posterior.calibrate`.
+    """
+    found = _previous(study)
+    if found is None:
+        return None
+    previous = found[0]
+    own = study.priors()
+    flat = previous.draws.reshape(-1, len(previous.names))
+    starts = np.full((n_chains, len(own)), np.nan)
+    shared = [(k, previous.names.index(n)) for k, n in enumerate(own) if n in previous.names]
+    if not shared or flat.shape[0] == 0:
+        return starts
+    priors = list(own.values())
+    unit = np.column_stack([priors[k].to_unit(flat[:, j]) for k, j in shared])
+    z = special.logit(np.clip(unit, 1e-9, 1 - 1e-9))
+    centred = z - z.mean(axis=0)
+    cov = np.atleast_2d(np.cov(centred, rowvar=False))
+    distance = np.einsum("ij,ij->i", centred @ np.linalg.pinv(cov), centred)
+    order = np.argsort(distance, kind="stable")
+    picks = order[((np.arange(n_chains) + 0.5) / n_chains * len(order)).astype(int)]
+    for column, (k, _) in enumerate(shared):
+        starts[:, k] = unit[picks, column]
+    return starts
+
+
+def prior_from_draws(study: Study) -> PriorFromDraws | None:
+    """The priors of ``study`` with its ``prior_from`` applied (``None`` without one).
+
+    Raises
+    ------
+    ConfigError
+        The other study cannot be read, has no finished calibration, shares no
+        parameter, or its posterior reaches this study's bounds.
+    """
+    found = _previous(study)
+    if found is None:
+        return None
+    previous, out, other_path = found
+    own = study.priors()
     shared = tuple(n for n in own if n in previous.names)
     if not shared:
         raise ConfigError(
-            f"study.prior_from: {other.path} calibrates {', '.join(previous.names)}, none of "
+            f"study.prior_from: {other_path} calibrates {', '.join(previous.names)}, none of "
             f"this study's {', '.join(own)}",
             hint="a posterior carries over to parameters of the same name",
         )

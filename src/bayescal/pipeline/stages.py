@@ -335,7 +335,11 @@ def calibrate_stage(
     priors: dict[str, Prior] | None = None,
     checkpoint_dir: Path | None = None,
 ) -> Posterior:
-    """Sample theta*, lambda and lambda* (``[calibration]``)."""
+    """Sample theta*, lambda and lambda* (``[calibration]``); with ``[study] prior_from``
+    the chains start from the previous posterior's draws
+    (:func:`bayescal.pipeline.sequential.warm_starts`)."""
+    from bayescal.pipeline.sequential import warm_starts
+
     section = ctx.study.calibration
     total = section.chains * (section.burn + section.samples)
     tick, close = _mcmc_tick(ctx, "calibration", total)
@@ -366,6 +370,7 @@ def calibrate_stage(
             moves=section.moves,
             max_draws=section.most_samples,
             on_extend=extend,
+            starts=warm_starts(ctx.study, section.chains),
         )
     finally:
         close()

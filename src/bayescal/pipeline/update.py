@@ -21,7 +21,15 @@ from bayescal.errors import ConfigError
 from bayescal.store import posterior as posterior_store
 from bayescal.store.stages import StageLog
 
-__all__ = ["HISTORY_FILE", "UPDATE_PATTERN", "Update", "update", "update_files"]
+__all__ = [
+    "HISTORY_FILE",
+    "UPDATE_PATTERN",
+    "Update",
+    "reuse_runs",
+    "runs_line",
+    "update",
+    "update_files",
+]
 
 #: Update study files beside the study's own: ``update-001.toml``, ``update-002.toml``, ...
 UPDATE_PATTERN = "update-{:03d}.toml"
@@ -100,6 +108,68 @@ def _update_raw(
     return raw
 
 
+def runs_line(previous: Study, changed: Study) -> str:
+    """One line: whether the previous study's simulator runs serve the update.
+
+    A run is cached by the simulator, its parameter values and the boundary
+    conditions it was driven by (:func:`bayescal.runner.run_key`), and a study's
+    boundary conditions are its record, cut by ``data.start`` and ``data.end``:
+    an update starts later (at the previous test window, less one warm-up) and
+    ends later, so its runs are made again. Were the two forcings the same (same
+    simulator, same boundary conditions), the update's run cache would find the
+    previous runs once they are linked into its output folder
+    (:func:`reuse_runs`).
+    """
+    from bayescal.data.measured import load_measured
+    from bayescal.runner import forcing_fingerprint
+
+    before = load_measured(previous).forcing
+    after = load_measured(changed).forcing
+    if forcing_fingerprint(before) == forcing_fingerprint(after):
+        source = previous.root / previous.study.output_dir / "simulations"
+        linked = reuse_runs(source, changed.root / changed.study.output_dir / "simulations")
+        return f"runs: reused {linked} from {source}"
+    day = 86400.0
+    more = (_end(after) - _end(before)) / day
+    later = float((after.start - before.start) / np.timedelta64(1, "s")) / day
+    line = f"runs: re-simulated: the boundary conditions now cover {more:g} more days"
+    if later > 0:
+        line += f" and start {later:g} days later"
+    return line + " (runs are cached by the boundary conditions they were driven by)"
+
+
+def reuse_runs(source: Path, target: Path) -> int:
+    """Hard-link (else copy) the cached runs ``source/runs/*.npz`` into ``target/runs``.
+
+    A run is found by its key (simulator, boundary conditions, parameter
+    values), so a linked run serves only a study that would have made it the
+    same; a run already there is kept. Returns how many runs ``target`` now
+    shares with ``source``.
+    """
+    import os
+    import shutil
+
+    runs = sorted((source / "runs").glob("*.npz"))
+    if runs:
+        (target / "runs").mkdir(parents=True, exist_ok=True)
+    for run in runs:
+        there = target / "runs" / run.name
+        if there.exists():
+            continue
+        try:
+            os.link(run, there)
+        except OSError:
+            shutil.copy2(run, there)
+    return len(runs)
+
+
+def _end(forcing: Any) -> float:
+    """The end of a forcing, in seconds of the UTC clock."""
+    start = float(np.asarray(forcing.start, dtype="datetime64[s]").astype(np.int64))
+    n = len(next(iter(forcing.series.values())))
+    return start + n * float(forcing.step)
+
+
 def _history_row(study: Study, label: str) -> dict[str, Any]:
     from bayescal.data.measured import load_measured
 
@@ -142,10 +212,13 @@ def update(
     ``end`` (default: the end of the file, ``data`` or the study's own), with
     ``[study] prior_from`` the previous study, written into
     ``OUTPUT_DIR/update-00k``. Its simulator runs are made again (runs are
-    cached by their boundary conditions, and the record is new); its stages
-    are cached and resumable like any study's. The history of the posterior
-    (means and 95 % intervals of every parameter and derived quantity, with
-    the training days of each step) is written to ``OUTPUT_DIR/update-history.csv``.
+    cached by their boundary conditions, and the record is new: one line says
+    so, :func:`runs_line`); its calibration chains start from the previous
+    posterior's draws (:func:`bayescal.pipeline.sequential.warm_starts`) with
+    the study's burn-in; its stages are cached and resumable like any study's.
+    The history of the posterior (means and 95 % intervals of every parameter
+    and derived quantity, with the training days of each step) is written to
+    ``OUTPUT_DIR/update-history.csv``.
 
     Raises
     ------
@@ -182,8 +255,11 @@ def update(
     changed = load_study(path)
     tell(
         f"update {k}: the record from {raw['data']['start']} on, with the posterior of "
-        f"{Path(previous.path or '').name} as prior; the simulator runs are made again on it"
+        f"{Path(previous.path or '').name} as prior; the calibration chains start from its "
+        f"draws; burn-in kept at {changed.calibration.burn} sweeps (a warm start was measured "
+        "not to converge sooner: the burn-in adapts the proposal widths)"
     )
+    tell(runs_line(previous, changed))
     run_pipeline(changed, options=options, say=tell)
     rows = [_history_row(study, "0")]
     for i, file in enumerate(update_files(study), start=1):

@@ -1,0 +1,53 @@
+"""A 14-day virtual wall record and its study cut at day eight (``prior_from``, ``update``).
+
+The built-in wall at a known truth with white noise, half-hourly from
+2012-02-01: one warm-up day and 13 daily periods. The study
+(:data:`compare_study.STUDY`, white errors) ends on day eight by default, so
+that a second study or ``bayescal update`` has the rest.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from compare_study import STUDY
+from virtual_wall import virtual_experiment
+
+#: The default truth (the boards as the study has them).
+TRUTH = {"k_cb": 0.124, "cp_cb": 845.41, "cp_fb": 840.0}
+#: Where the first study's record ends.
+END = "2012-02-09T00:00"
+
+
+def record(truth: dict[str, float] | None = None, seed: int = 5) -> pd.DataFrame:
+    """The 14-day record at ``truth`` (default :data:`TRUTH`) with noise of ``seed``."""
+    ve = virtual_experiment(
+        seed=seed, truth=truth or TRUTH, runs=5, periods=13, warmup_days=1, test_days=0
+    )
+    times = pd.date_range("2012-02-01", periods=ve.layout.n_total, freq="30min")
+    return pd.DataFrame(
+        {
+            "time": times.strftime("%Y-%m-%dT%H:%M:%S"),
+            "T_se": np.round(ve.boundary["temp_surf_out"], 6),
+            "T_si": np.round(ve.boundary["temp_surf_in"], 6),
+            "q_si": np.round(ve.measured["heat_flux_in"], 6),
+        }
+    )
+
+
+def write_study(
+    folder: Path, end: str | None = END, extra: str = "", data: pd.DataFrame | None = None
+) -> Path:
+    """``folder`` with ``wall.csv`` (``data``, default :func:`record`) and ``study.toml``
+    ending at ``end`` (``None``: the whole record), ``extra`` added to ``[study]``."""
+    folder.mkdir(parents=True, exist_ok=True)
+    (record() if data is None else data).to_csv(folder / "wall.csv", index=False)
+    text = STUDY.format(name=folder.name, model="white")
+    if end is not None:
+        text = text.replace('time_zone = "UTC"\n', f'time_zone = "UTC"\nend = "{end}"\n')
+    text = text.replace("seed = 11\n", "seed = 11\n" + extra)
+    (folder / "study.toml").write_text(text, encoding="utf-8")
+    return folder
