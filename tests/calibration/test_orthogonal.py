@@ -18,8 +18,10 @@ import numpy as np
 import pytest
 from scipy import linalg
 
+from bayescal.calibration.conditional import OutputDiscrepancy
 from bayescal.calibration.dense import DenseCalibrationDensity
 from bayescal.calibration.kron import KronCalibrationDensity
+from bayescal.calibration.loo import loo_conditional
 from bayescal.calibration.orthogonal import constrained_covariance, constraint_matrix
 from bayescal.calibration.target import CalibrationPosterior
 from bayescal.design import UniformPrior
@@ -211,3 +213,79 @@ def test_the_target_equals_the_raw_data_density_with_the_constraint_on_the_sampl
     )
     target = CalibrationPosterior(dense, priors, (5.0, 5.0), observations=today)
     assert target(v) - target.log_prior(v) != pytest.approx(ref, rel=1e-6)
+
+
+def _perp(sigma: np.ndarray, f: np.ndarray, rows: np.ndarray) -> np.ndarray:
+    """``sigma`` conditioned on ``f^T delta[rows] = 0``, written out."""
+    sf = sigma[:, rows] @ f
+    return sigma - sf @ np.linalg.solve(f.T @ sf[rows], sf.T)
+
+
+@pytest.mark.parametrize(("error", "phi"), [("white", 0.0), ("ar1", 0.6)])
+def test_the_kriged_discrepancy_is_the_dense_constrained_one_and_orthogonal(
+    small_wall, error: str, phi: float
+) -> None:
+    # The simulator route: y* - y_sim = K delta + e, delta constrained at the draw's theta*.
+    _, _, em = small_wall
+    rng = np.random.default_rng(5)
+    k = np.asarray(em.basis.k, dtype=float)
+    (n, p), m = k.shape, em.x.shape[0]
+    noise = OutputNoise("q", (0, n), tuple(range(p)), error, discrepancy="orthogonal")  # type: ignore[arg-type]
+    obs = ObservationModel((noise,), k, rng.normal(size=(n, m)))
+    x_new = np.vstack([em.x, rng.random((2, em.x.shape[1]))])  # every training period again
+    y_sim = rng.normal(size=(n, m))
+    theta = rng.random(em.theta.shape[1])
+    lam_star, r = 12.0, 0.05
+    values = {"lambda": em.lam, "lambda_star": lam_star, "phi": phi, "delta_rel": r}
+    field = OutputDiscrepancy.build(em, obs, 0, x_new)
+    with pytest.raises(ValueError, match="theta"):
+        field.condition(values, obs.weights_of(0, y_sim, phi))
+    shift, cov = field.condition(values, obs.weights_of(0, y_sim, phi), None, theta)
+
+    # dense, in sample space, the constraint written on the training rows
+    ktk = np.einsum("ij,ij->j", k, k)
+    dense = DenseCalibrationDensity(em.theta, em.x, em.kernels, ktk, em.w, obs.ls_weights())
+    grad = dense.mean_gradient(theta, 1.0 / (em.lam * ktk))  # (p, m, t)
+    x_all = np.vstack([em.x, x_new])
+    big, n_new = x_all.shape[0], x_new.shape[0]
+    c_delta = linalg.block_diag(*[r * kern.variance * kern.x_corr(x_all) for kern in em.kernels])
+    rows = (np.arange(p)[:, None] * big + np.arange(m)).ravel()
+    c_delta = _perp(c_delta, (ktk[:, None, None] * grad).reshape(p * m, -1), rows)
+    to_y = np.zeros((n * m, p * big))
+    for j in range(p):
+        to_y[:, j * big : j * big + m] = np.kron(np.eye(m), k[:, j][:, None])
+    to_z = np.zeros((n_new * p, p * big))
+    for a in range(n_new):
+        for j in range(p):
+            to_z[a * p + j, j * big + m + a] = 1.0
+    i = np.arange(n)
+    c_yy = to_y @ c_delta @ to_y.T + np.kron(np.eye(m), phi ** np.abs(i[:, None] - i) / lam_star)
+    c_zy = to_z @ c_delta @ to_y.T
+    resid = (obs.y_star - y_sim).T.reshape(-1)
+    ref_mean = (c_zy @ np.linalg.solve(c_yy, resid)).reshape(n_new, p)
+    ref_cov = to_z @ c_delta @ to_z.T - c_zy @ np.linalg.solve(c_yy, c_zy.T)
+    np.testing.assert_allclose(shift, ref_mean, rtol=0, atol=REL * np.abs(ref_mean).max())
+    for a in range(n_new):
+        ref = ref_cov[a * p : (a + 1) * p, a * p : (a + 1) * p]
+        np.testing.assert_allclose(cov[a], ref, rtol=0, atol=REL * np.abs(ref).max())
+    # the kriged discrepancy at the training periods is orthogonal to the sensitivities
+    at_train = shift[:m]  # (m, p)
+    inner = np.einsum("j,ijk,ij->k", ktk, np.swapaxes(grad, 0, 1), at_train)
+    scale = np.einsum("j,ijk,ij->k", ktk, np.abs(np.swapaxes(grad, 0, 1)), np.abs(at_train))
+    assert np.all(np.abs(inner) < 1e-9 * scale)
+    assert np.abs(at_train).max() > 1e-3  # and not zero
+
+
+def test_loo_conditioning_with_a_block_diagonal_full_prior_is_the_per_basis_one() -> None:
+    rng = np.random.default_rng(2)
+    m, p = 5, 2
+    x = rng.random((m, 1))
+    prior = np.stack([0.3 * np.exp(-((x - x.T) ** 2) / 0.1), 0.1 * np.exp(-((x - x.T) ** 2))])
+    blocks = np.tile(np.array([[0.05, 0.01], [0.01, 0.04]]), (m, 1, 1))
+    diff = rng.normal(size=(m, p))
+    full = np.zeros((p, m, p, m))
+    for j in range(p):
+        full[j, :, j, :] = prior[j]
+    got, ref = loo_conditional(diff, full, blocks), loo_conditional(diff, prior, blocks)
+    np.testing.assert_allclose(got[0], ref[0], rtol=1e-12)
+    np.testing.assert_allclose(got[1], ref[1], rtol=1e-12)

@@ -43,12 +43,17 @@ from numpy.typing import NDArray
 from scipy import linalg
 
 from bayescal.calibration.grid import StackedGrid
+from bayescal.emulator.dense import GridData
+from bayescal.emulator.gp import Emulator
 from bayescal.emulator.kernel import LogDensity
 
 __all__ = [
+    "Sensitivity",
     "Woodbury",
     "constrained_covariance",
+    "constrained_prior",
     "constraint_matrix",
+    "observed_gradient",
     "rotated_gradient",
 ]
 
@@ -85,6 +90,89 @@ def rotated_gradient(
         dc_hat = grid.q_t_trans[j] @ dc  # (R, t)
         out[j] = grid.l_x[j][:, None] * (h.T @ dc_hat)
     return out
+
+
+def observed_gradient(grid: StackedGrid, theta_star: FloatArray, a: FloatArray) -> FloatArray:
+    """``d mean / d theta*`` of every basis at the observed periods ``(p, m_obs, t)``.
+
+    ``a``: the simulator nuggets ``(p,)`` (the mean depends on ``lambda``). [-]
+    """
+    hs = [
+        grid.w_rot[j] / (np.multiply.outer(grid.l_t[j], grid.l_x[j]) + a[j])
+        for j in range(grid.n_bases)
+    ]
+    rot = rotated_gradient(grid, theta_star, hs)
+    p_obs = np.stack([b.p_obs for b in grid.bases])
+    out: FloatArray = np.einsum("jia,jak->jik", p_obs, rot)
+    return out
+
+
+class Sensitivity:
+    """``F`` of the orthogonal outputs at any draw, as the calibration computed it.
+
+    For predictions and leave-one-period-out scores: the emulator's mean over
+    the training periods only (an emulator extended to a test window,
+    :meth:`~bayescal.emulator.gp.Emulator.extended`, is cut back to them), so
+    that the constraint is the calibration's.
+
+    Parameters
+    ----------
+    emulator
+        The trained emulator (possibly extended; its first ``m`` periods are the
+        training periods).
+    m
+        Training periods ``m*``.
+    outputs
+        The bases of every output whose discrepancy is orthogonal.
+    """
+
+    def __init__(self, emulator: Emulator, m: int, outputs: Sequence[Sequence[int]]) -> None:
+        n_runs, p = emulator.theta.shape[0], emulator.w.shape[1]
+        w = emulator.w.reshape(n_runs, -1, p)[:, :m].reshape(n_runs * m, p)
+        data = GridData.build(
+            emulator.theta,
+            emulator.x[:m],
+            emulator.kernels,
+            emulator.basis.ktk,
+            w,
+            np.zeros((m, p)),
+        )
+        self.grid = StackedGrid.of(data)
+        self.outputs = tuple(tuple(b) for b in outputs)
+
+    def __call__(self, theta_star: FloatArray, lam: float) -> FloatArray:
+        """``F`` ``(p, m*, K)`` at the draw's theta* (unit scale) and ``lambda``."""
+        ktk = self.grid.ktk
+        gradient = observed_gradient(self.grid, theta_star, 1.0 / (float(lam) * ktk))
+        return constraint_matrix(gradient, ktk, self.outputs)
+
+
+def constrained_prior(blocks: FloatArray, f: FloatArray) -> FloatArray:
+    """The orthogonal discrepancy's covariance over training and other periods.
+
+    Parameters
+    ----------
+    blocks
+        The unconstrained covariance of each basis ``(p_o, M, M)``, the ``m``
+        training periods first. [-]
+    f
+        The constraint on the training periods ``(p_o, m, K)``. [-]
+
+    Returns
+    -------
+    numpy.ndarray
+        ``(p_o, M, p_o, M)``, basis-major. [-]
+    """
+    p, big, _ = blocks.shape
+    m = f.shape[1]
+    # rows: the training periods of every basis first, then the others
+    start = np.arange(p)[:, None] * big
+    order = np.concatenate([(start + np.arange(m)).ravel(), (start + np.arange(m, big)).ravel()])
+    sigma = linalg.block_diag(*blocks)[np.ix_(order, order)]
+    perp = constrained_covariance(sigma, f.reshape(p * m, -1))
+    out = np.empty_like(perp)
+    out[np.ix_(order, order)] = perp
+    return out.reshape(p, big, p, big)
 
 
 def constraint_matrix(
