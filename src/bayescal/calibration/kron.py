@@ -617,8 +617,7 @@ class KronCalibrationDensity:
         a_arr = np.broadcast_to(np.asarray(a, dtype=float), (self._data.n_bases,))
         hs = [self._sim(j, float(a_j)).h for j, a_j in enumerate(a_arr)]
         rot = rotated_gradient(self._grid, np.asarray(theta_star, float), hs)
-        p_obs = np.stack([b.p_obs for b in self._grid.bases])
-        out: FloatArray = np.einsum("jia,jak->jik", p_obs, rot)
+        out: FloatArray = self._grid.p_obs @ rot
         return out
 
     def _overlap(self, bases: tuple[int, ...]) -> FloatArray:

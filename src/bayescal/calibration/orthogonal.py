@@ -41,6 +41,7 @@ from collections.abc import Sequence
 import numpy as np
 from numpy.typing import NDArray
 from scipy import linalg
+from scipy.linalg import lapack
 
 from bayescal.calibration.grid import StackedGrid
 from bayescal.emulator.dense import GridData
@@ -101,9 +102,7 @@ def observed_gradient(grid: StackedGrid, theta_star: FloatArray, a: FloatArray) 
         grid.w_rot[j] / (np.multiply.outer(grid.l_t[j], grid.l_x[j]) + a[j])
         for j in range(grid.n_bases)
     ]
-    rot = rotated_gradient(grid, theta_star, hs)
-    p_obs = np.stack([b.p_obs for b in grid.bases])
-    out: FloatArray = np.einsum("jia,jak->jik", p_obs, rot)
+    out: FloatArray = grid.p_obs @ rotated_gradient(grid, theta_star, hs)
     return out
 
 
@@ -238,24 +237,18 @@ class Woodbury:
         self.grid = grid
         self.f = np.asarray(f, dtype=float)
         self.delta = np.asarray(delta, dtype=float)
+        self.sigma_f = self.delta[:, None, None] * (grid.sx_obs @ self.f)  # (p, m_obs, K)
+        self.m = np.einsum("jik,jil->kl", self.f, self.sigma_f)
         k = self.f.shape[2]
-        self.m = np.zeros((k, k))
         self.c = np.zeros((k, k))
         self.b = np.zeros(k)
-        for j, piece in enumerate(grid.bases):
-            if self.delta[j] > 0.0:
-                fj = self.f[j]
-                self.m += self.delta[j] * (fj.T @ (piece.sx_obs @ fj))
 
-    def _rotated(self, j: int) -> FloatArray:
-        """``Q_x^T Sigma_j F_j`` (full grid) ``(m*, K)``."""
-        piece = self.grid.bases[j]
-        out: FloatArray = (self.delta[j] * self.grid.l_x[j])[:, None] * (piece.p_obs.T @ self.f[j])
-        return out
-
-    def _plain(self, j: int) -> FloatArray:
-        """``Sigma_j F_j`` over the observed periods ``(m_obs, K)``."""
-        out: FloatArray = self.delta[j] * (self.grid.bases[j].sx_obs @ self.f[j])
+    def _rotated(self, bases: Sequence[int]) -> FloatArray:
+        """``Q_x^T Sigma_j F_j`` of ``bases`` (full grid) ``(q, m*, K)``."""
+        idx = list(bases)
+        grid = self.grid
+        f_rot = np.swapaxes(grid.p_obs[idx], 1, 2) @ self.f[idx]
+        out: FloatArray = (self.delta[idx, None] * grid.l_x[idx])[:, :, None] * f_rot
         return out
 
     def diagonal(self, bases: Sequence[int], schur: FloatArray, resid: FloatArray) -> None:
@@ -263,11 +256,10 @@ class Woodbury:
 
         ``schur`` and ``resid`` ``(len(bases), m*)``: the diagonal and ``z - u``.
         """
-        for row, j in enumerate(bases):
-            u = self._rotated(j)
-            scaled = u / schur[row][:, None]
-            self.c += u.T @ scaled
-            self.b += scaled.T @ resid[row]
+        u = self._rotated(bases)
+        scaled = u / schur[:, :, None]
+        self.c += np.einsum("jik,jil->kl", u, scaled)
+        self.b += np.einsum("jik,ji->k", scaled, resid)
 
     def factored(
         self, bases: Sequence[int], chol: FloatArray, half: FloatArray, rotated: bool
@@ -277,20 +269,21 @@ class Woodbury:
         ``half = chol^-1 r`` (rows basis-major); ``rotated``: the rows are the
         bases' rotated periods (full grid), else their observed periods.
         """
-        u = np.vstack([self._rotated(j) if rotated else self._plain(j) for j in bases])
-        half_u = linalg.solve_triangular(chol, u, lower=True, check_finite=False)
+        u = self._rotated(bases) if rotated else self.sigma_f[list(bases)]
+        half_u = lapack.dtrtrs(chol, u.reshape(-1, u.shape[2]), lower=1)[0]
         self.c += half_u.T @ half_u
         self.b += half_u.T @ half
 
     def finish(self) -> LogDensity:
         """``log |M - C| - log |M|`` and ``b^T (M - C)^-1 b`` (no rows of its own)."""
         try:
-            chol_m = linalg.cholesky(self.m, lower=True, check_finite=False)
-            chol_d = linalg.cholesky(self.m - self.c, lower=True, check_finite=False)
+            chol_m = np.linalg.cholesky(self.m)
+            chol_d = np.linalg.cholesky(self.m - self.c)
         except np.linalg.LinAlgError as exc:
             raise np.linalg.LinAlgError(
                 "the orthogonal discrepancy's constraint is degenerate"
             ) from exc
-        half = linalg.solve_triangular(chol_d, self.b, lower=True, check_finite=False)
+        half = np.linalg.solve(chol_d, self.b)
         logdet = 2.0 * float(np.sum(np.log(np.diag(chol_d))) - np.sum(np.log(np.diag(chol_m))))
-        return LogDensity(-0.5 * (logdet + float(half @ half)), logdet, float(half @ half), 0)
+        quad = float(half @ half)
+        return LogDensity(-0.5 * (logdet + quad), logdet, quad, 0)

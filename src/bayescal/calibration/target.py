@@ -117,10 +117,12 @@ class CalibrationPosterior:
 
     def _reset(self) -> None:
         self._observed_memo = Lru(2)
+        self._constraint_memo = Lru(2)
 
     def __getstate__(self) -> dict[str, Any]:
         state = self.__dict__.copy()
         state.pop("_observed_memo")
+        state.pop("_constraint_memo")
         return state
 
     def __setstate__(self, state: dict[str, Any]) -> None:
@@ -226,14 +228,17 @@ class CalibrationPosterior:
         return total
 
     def _constraint(self, theta_star: FloatArray, a: FloatArray) -> FloatArray | None:
-        """``F`` of the orthogonal discrepancies at theta* (recomputed at every
-        evaluation: the model's sensitivities move with theta* and ``lambda``), else None."""
+        """``F`` of the orthogonal discrepancies at theta* (recomputed wherever theta* or
+        ``lambda`` moved: the model's sensitivities move with them), else None."""
         obs = self.observations
         if obs is None or not obs.orthogonal_outputs:
             return None
-        gradient = self.algebra.mean_gradient(theta_star, a)
         bases = [obs.outputs[q].bases for q in obs.orthogonal_outputs]
-        return constraint_matrix(gradient, self.algebra.data.ktk, bases)
+        ktk = self.algebra.data.ktk
+        return self._constraint_memo.get(
+            theta_star.tobytes() + a.tobytes(),
+            lambda: constraint_matrix(self.algebra.mean_gradient(theta_star, a), ktk, bases),
+        )
 
     def _delta(self, rel: FloatArray) -> tuple[FloatArray | None, FloatArray | None]:
         """Per-basis discrepancy variances ``r_o tau_j^-1`` from the outputs' ``r``:
