@@ -289,3 +289,38 @@ def test_loo_conditioning_with_a_block_diagonal_full_prior_is_the_per_basis_one(
     got, ref = loo_conditional(diff, full, blocks), loo_conditional(diff, prior, blocks)
     np.testing.assert_allclose(got[0], ref[0], rtol=1e-12)
     np.testing.assert_allclose(got[1], ref[1], rtol=1e-12)
+
+
+def test_a_parameter_the_output_does_not_see_has_no_constraint() -> None:
+    # rho = 1 switches theta_0 off in every basis: its sensitivity is exactly zero, and
+    # the constraint keeps the other parameter's row only (a zero row would make
+    # F^T Sigma F singular).
+    rng = np.random.default_rng(6)
+    t, runs, per, p = 2, 6, 5, 2
+    kernels = []
+    for _ in range(p):
+        rho = rng.uniform(0.3, 0.9, t + 1)
+        rho[0] = 1.0
+        kernels.append(SeparableKernel(rho, 1.0, t))
+    theta, x = rng.random((runs, t)), rng.random((per, 1))
+    w = rng.normal(size=(runs * per, p))
+    k = np.linalg.qr(rng.normal(size=(6, p)))[0]
+    model = ObservationModel(
+        (OutputNoise("q", (0, 6), (0, 1), "white", discrepancy="orthogonal"),), k,
+        rng.normal(size=(6, per)),
+    )  # fmt: skip
+    ktk = np.einsum("ij,ij->j", k, k)
+    fast = KronCalibrationDensity(theta, x, kernels, ktk, w, model.ls_weights())
+    dense = DenseCalibrationDensity(theta, x, kernels, ktk, w, model.ls_weights())
+    ts = rng.random(t)
+    assert np.all(fast.mean_gradient(ts, np.full(p, 0.05))[:, :, 0] == 0.0)
+    f = constraint_matrix(fast.mean_gradient(ts, np.full(p, 0.05)), ktk, [(0, 1)])
+    assert f.shape == (p, per, 1)
+    v = np.array([*ts, 20.0, 5.0, 0.3])
+    values = []
+    for algebra in (fast, dense):
+        target = CalibrationPosterior(algebra, [UniformPrior(0.0, 1.0)] * t, (5.0, 5.0),
+                                      observations=model)  # fmt: skip
+        values.append(target(v))
+    assert np.isfinite(values[0])
+    assert values[0] == pytest.approx(values[1], rel=REL)

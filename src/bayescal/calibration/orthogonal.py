@@ -187,17 +187,21 @@ def constraint_matrix(
         ``k_j^T k_j`` ``(p,)``. [-]
     outputs
         The bases of every output whose discrepancy is orthogonal: ``t``
-        constraints each, zero on the other bases.
+        constraints each, zero on the other bases. A parameter whose column is zero
+        (its input switched off, ``rho = 1``, in every basis of the output) has none.
     """
     p, m, t = gradient.shape
     f = np.zeros((p, m, t * len(outputs)))
     for q, bases in enumerate(outputs):
         idx = list(bases)
         f[idx, :, q * t : (q + 1) * t] = ktk[idx, None, None] * gradient[idx]
-    # the constraint depends on the columns' span only: scale each to unit norm
+    # the constraint depends on the columns' span only: scale each to unit norm; a
+    # parameter the output does not see at all (its input switched off, rho = 1) has
+    # no column: nothing to be orthogonal to
     norm = np.sqrt(np.sum(f * f, axis=(0, 1)))
-    f /= np.where(norm > 0.0, norm, 1.0)
-    return f
+    keep = norm > 0.0
+    out: FloatArray = f[:, :, keep] / norm[keep]
+    return out
 
 
 def constrained_covariance(sigma: FloatArray, f: FloatArray) -> FloatArray:
@@ -212,6 +216,8 @@ def constrained_covariance(sigma: FloatArray, f: FloatArray) -> FloatArray:
         periods; the others are predicted). [-]
     """
     n = f.shape[0]
+    if f.shape[1] == 0:
+        return np.array(sigma, dtype=float, copy=True)
     sf = sigma[:, :n] @ f  # (N, K)
     m = f.T @ sf[:n]
     chol = linalg.cholesky(0.5 * (m + m.T), lower=True, check_finite=False)

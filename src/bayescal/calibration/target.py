@@ -235,10 +235,11 @@ class CalibrationPosterior:
             return None
         bases = [obs.outputs[q].bases for q in obs.orthogonal_outputs]
         ktk = self.algebra.data.ktk
-        return self._constraint_memo.get(
+        f: FloatArray = self._constraint_memo.get(
             theta_star.tobytes() + a.tobytes(),
             lambda: constraint_matrix(self.algebra.mean_gradient(theta_star, a), ktk, bases),
         )
+        return f if f.shape[2] else None
 
     def _delta(self, rel: FloatArray) -> tuple[FloatArray | None, FloatArray | None]:
         """Per-basis discrepancy variances ``r_o tau_j^-1`` from the outputs' ``r``:
