@@ -324,3 +324,63 @@ def test_a_parameter_the_output_does_not_see_has_no_constraint() -> None:
         values.append(target(v))
     assert np.isfinite(values[0])
     assert values[0] == pytest.approx(values[1], rel=REL)
+
+
+def test_the_emulator_route_equals_dense_conditioning_with_the_constraint(small_wall) -> None:
+    # z = eta(theta*, x) + delta(x) at new periods given the runs' weights W and every
+    # measured sample y* = K (eta + delta) + e, delta constrained on the training periods.
+    _, _, em = small_wall
+    rng = np.random.default_rng(11)
+    k = np.asarray(em.basis.k, dtype=float)
+    (n, p), m = k.shape, em.x.shape[0]
+    noise = OutputNoise("q", (0, n), tuple(range(p)), "white", discrepancy="orthogonal")
+    obs = ObservationModel((noise,), k, rng.normal(size=(n, m)))
+    theta = rng.random(em.theta.shape[1])
+    x_new = rng.random((2, em.x.shape[1]))
+    x_all = np.vstack([em.x, x_new])
+    big, n_new = x_all.shape[0], x_new.shape[0]
+    lam_star, r = 40.0, 0.3
+    values = {"lambda": em.lam, "lambda_star": lam_star, "delta_rel": r}
+    field = OutputDiscrepancy.build(em, obs, 0, x_new)
+    mean_w, _ = em.predict_weights(np.broadcast_to(theta, (big, theta.size)), x_all)
+    eta_cov = em.weight_covariance(theta, x_all)
+    shift, cov = field.condition(values, mean_w[:m], eta_cov, theta)
+    got = mean_w[m:] + shift
+
+    # dense: [W_0 .. W_p-1, y* (period-major), z (new, basis-minor)] over the latent
+    # L = eta + delta (basis-major over the M periods)
+    ktk = np.einsum("ij,ij->j", k, k)
+    dense = DenseCalibrationDensity(em.theta, em.x, em.kernels, ktk, em.w, obs.ls_weights())
+    grad = dense.mean_gradient(theta, 1.0 / (em.lam * ktk))
+    z_sim = grid_inputs(em.theta, em.x)
+    z_all = np.hstack([np.tile(theta, (big, 1)), x_all])
+    n_sim = z_sim.shape[0]
+    delta = linalg.block_diag(*[r * kern.variance * kern.x_corr(x_all) for kern in em.kernels])
+    rows = (np.arange(p)[:, None] * big + np.arange(m)).ravel()
+    latent = _perp(delta, (ktk[:, None, None] * grad).reshape(p * m, -1), rows)
+    latent += linalg.block_diag(*[kern.full(z_all) for kern in em.kernels])
+    cross = linalg.block_diag(*[kern.full(z_sim, z_all) for kern in em.kernels])
+    sims = linalg.block_diag(
+        *[kern.full(z_sim) + em.nuggets[j] * np.eye(n_sim) for j, kern in enumerate(em.kernels)]
+    )
+    to_y = np.zeros((n * m, p * big))
+    for j in range(p):
+        to_y[:, j * big : j * big + m] = np.kron(np.eye(m), k[:, j][:, None])
+    to_z = np.zeros((n_new * p, p * big))
+    for a in range(n_new):
+        for j in range(p):
+            to_z[a * p + j, j * big + m + a] = 1.0
+    maps = np.vstack([to_y, to_z])
+    full = np.block([[sims, cross @ maps.T], [maps @ cross.T, maps @ latent @ maps.T]])
+    full[p * n_sim : p * n_sim + n * m, p * n_sim : p * n_sim + n * m] += np.eye(n * m) / lam_star
+    obs_rows = np.arange(p * n_sim + n * m)
+    tgt = np.arange(p * n_sim + n * m, full.shape[0])
+    data = np.concatenate([em.w[:, j] for j in range(p)] + [obs.y_star.T.reshape(-1)])
+    gain = np.linalg.solve(full[np.ix_(obs_rows, obs_rows)], full[np.ix_(obs_rows, tgt)]).T
+    ref_mean = (gain @ data).reshape(n_new, p)
+    ref_cov = full[np.ix_(tgt, tgt)] - gain @ full[np.ix_(obs_rows, tgt)]
+    np.testing.assert_allclose(got, ref_mean, rtol=0, atol=REL * np.abs(ref_mean).max())
+    for a in range(n_new):
+        ref = ref_cov[a * p : (a + 1) * p, a * p : (a + 1) * p]
+        np.testing.assert_allclose(cov[a], ref, rtol=0, atol=REL * np.abs(ref).max())
+    assert np.abs(shift).max() > 1e-3  # conditioning moved something
