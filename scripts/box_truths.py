@@ -83,6 +83,7 @@ DISCREPANCY = {
     "conditions": '"conditions"',
     "independent": '"independent"',
     "both": '"both"',
+    "orthogonal": '"orthogonal"',
 }
 
 

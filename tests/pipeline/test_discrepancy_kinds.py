@@ -38,7 +38,7 @@ def _with_kind(tmp_path: Path, value: str, phase: bool = False) -> Path:
     return folder
 
 
-@pytest.mark.parametrize("kind", ["conditions", "independent", "both"])
+@pytest.mark.parametrize("kind", ["conditions", "independent", "both", "orthogonal"])
 def test_the_study_file_states_the_kind(tmp_path: Path, kind: str) -> None:
     study = load_study(_with_kind(tmp_path, f'"{kind}"'))
     assert study.outputs.errors[OUTPUT].discrepancy == kind
@@ -63,7 +63,7 @@ def test_an_unknown_kind_is_refused(tmp_path: Path) -> None:
         load_study(_with_kind(tmp_path, '"daily"'))
 
 
-@pytest.mark.parametrize("kind", ['"independent"', '"both"'])
+@pytest.mark.parametrize("kind", ['"independent"', '"both"', '"orthogonal"'])
 def test_the_phase_takes_a_discrepancy_over_the_conditions_only(tmp_path: Path, kind: str) -> None:
     with pytest.raises(ConfigError, match=r"does not combine with the difference-process phase"):
         load_study(_with_kind(tmp_path, kind, phase=True))
@@ -76,6 +76,7 @@ def test_the_phase_takes_a_discrepancy_over_the_conditions_only(tmp_path: Path, 
         ("conditions", ("lambda_star", "phi", "delta_rel")),
         ("independent", ("lambda_star", "phi", "delta_ind")),
         ("both", ("lambda_star", "phi", "delta_rel", "delta_ind")),
+        ("orthogonal", ("lambda_star", "phi", "delta_rel")),
         (False, ("lambda_star", "phi")),
     ],
 )
@@ -87,7 +88,8 @@ def test_each_kind_makes_its_coordinates(kind: bool | str, names: tuple[str, ...
     over_x, independent = model.discrepancy_variances(
         [0.1, 0.2][: len(model.delta_coordinates)], [2.0, 3.0]
     )
-    if kind in (True, "conditions", "both"):
+    assert model.orthogonal_outputs == ((0,) if kind == "orthogonal" else ())
+    if kind in (True, "conditions", "both", "orthogonal"):
         assert over_x is not None
         np.testing.assert_allclose(over_x, [0.2, 0.3])
     else:

@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 import pytest
 
+from bayescal.calibration.orthogonal import Sensitivity
 from bayescal.calibration.posterior import Posterior, calibrate
 from bayescal.emulator.assemble import NoiseSpec, assemble
 from bayescal.pipeline.predict import (
@@ -155,3 +156,48 @@ def test_emulator_route_with_a_test_window_conditions_on_its_runs(
         em, a, post, draws=20, measured={"heat_flux_in": ve.measured["heat_flux_in"]}
     )
     assert np.all(np.isfinite(band.lower["heat_flux_in"][test]))
+
+
+def test_the_orthogonal_discrepancy_predicted_on_the_training_days_is_orthogonal(
+    small_wall: tuple[Any, Any, Any],
+) -> None:
+    # Both routes krige the discrepancy with the constrained covariance at each draw's
+    # theta* and lambda: on the training periods its weights meet the constraint
+    # F^T delta = 0 (calibration/orthogonal.py) at that draw.
+    ve, _, em = small_wall
+    a = assemble(
+        ve.design, ve.runs, ve.measured, ve.boundary, ve.layout, components=2,
+        noise={"heat_flux_in": NoiseSpec("white", None, discrepancy="orthogonal")},
+    )  # fmt: skip
+    post = calibrate(em, a, n_chains=2, n_burn=100, n_draws=50, seed=3, backend="serial",
+                     observations=a.observations)  # fmt: skip
+    pick = np.arange(0, 100, 33)
+    theta = post.draws.reshape(-1, len(post.names))[pick]
+    runs = np.array(
+        [simulate(ve.boundary, dict(zip(post.names, row, strict=True))) for row in theta]
+    )
+    obs = a.observations
+    ko = obs.block(0)[0]
+    sensitivity = Sensitivity(em, a.n_periods, [obs.outputs[0].bases])
+    unit = post.unit_draws.reshape(-1, len(post.names))[pick]
+    lam = np.asarray(post.aux).reshape(-1, len(post.aux_names))[pick, 0]
+    assert post.aux_names[0] == "lambda"
+    # r = 1: the discrepancy takes up what the constraint and the noise let it (the limit
+    # of no noise is ill-conditioned along F, where the constrained covariance is singular)
+    aux = np.array(post.aux, dtype=float, copy=True)
+    aux[..., post.aux_names.index("delta_rel")] = 1.0
+    sharp = dataclasses.replace(post, aux=aux)
+    runs_in = {"heat_flux_in": runs}
+    mean, var = conditioned_discrepancy(em, a, sharp, pick, runs_in)["heat_flux_in"]
+    assert np.all(np.isfinite(mean[:, _train_mask(a)]))
+    for s in range(pick.size):
+        delta = np.linalg.lstsq(ko, a.layout.cut(mean[s]) / a.outputs.sd[:, None], rcond=None)[0]
+        f = sensitivity(unit[s], float(lam[s]))  # (p, m*, t)
+        inner = np.einsum("jik,ji->k", f, delta)
+        assert np.all(np.abs(inner) < 1e-8 * np.abs(delta).max()), inner
+        assert np.abs(delta).max() > 1e-3  # not zero
+    # with the calibration's own r and lambda*, both routes: finite, positive variances
+    for route in (runs_in, None):
+        mean, var = conditioned_discrepancy(em, a, post, pick, route)["heat_flux_in"]
+        assert np.all(np.isfinite(mean[:, _train_mask(a)]))
+        assert np.all(var[:, _train_mask(a)] > 0)

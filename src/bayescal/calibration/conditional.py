@@ -48,6 +48,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import linalg
 
+from bayescal.calibration.orthogonal import Sensitivity, constrained_prior
 from bayescal.emulator.gp import Emulator
 from bayescal.emulator.noise import ObservationModel
 
@@ -68,7 +69,8 @@ def krige_observed(
     prior
         Covariance of each basis's field before the observations, ``(p, M, M)``
         over ``M = m + P`` periods: the ``m`` observed ones first, then the
-        ``P`` to predict. [-]
+        ``P`` to predict; or ``(p, M, p, M)`` where the bases are correlated
+        (the orthogonal discrepancy). [-]
     noise
         Covariance ``(p, p)`` of one observed period's errors (the same for
         every period, independent between periods). [-]
@@ -81,26 +83,33 @@ def krige_observed(
         ``(P, p, p)``. [-]
     """
     m, p = resid.shape
-    if prior.shape[0] != p or prior.shape[1] != prior.shape[2] or prior.shape[1] < m:
+    if prior.shape[0] != p or prior.shape[1] != prior.shape[-1] or prior.shape[1] < m:
         raise ValueError(f"prior {prior.shape} does not fit residuals {resid.shape}")
     if noise.shape != (p, p):
         raise ValueError(f"noise block {noise.shape} does not fit {p} bases")
     n_new = prior.shape[1] - m
     sigma = np.kron(noise, np.eye(m))  # rows basis-major: basis j, period i -> j m + i
-    cross = np.zeros((p * m, n_new, p))
-    for j in range(p):
-        rows = slice(j * m, (j + 1) * m)
-        sigma[rows, rows] += prior[j, :m, :m]
-        cross[rows, :, j] = prior[j, :m, m:]
+    if prior.ndim == 4:  # bases correlated a priori
+        sigma += prior[:, :m, :, :m].reshape(p * m, p * m)
+        cross = prior[:, :m, :, m:].transpose(0, 1, 3, 2).reshape(p * m, n_new, p)
+        own = np.einsum("kala->akl", prior[:, m:, :, m:])
+    else:
+        cross = np.zeros((p * m, n_new, p))
+        for j in range(p):
+            rows = slice(j * m, (j + 1) * m)
+            sigma[rows, rows] += prior[j, :m, :m]
+            cross[rows, :, j] = prior[j, :m, m:]
+        own = np.zeros((n_new, p, p))
+        own[:, np.arange(p), np.arange(p)] = np.stack(
+            [np.diagonal(prior[j])[m:] for j in range(p)], axis=1
+        )
     chol = linalg.cholesky(sigma, lower=True, check_finite=False)
     alpha = linalg.cho_solve((chol, True), resid.T.reshape(-1), check_finite=False)
     mean = np.einsum("ial,i->al", cross, alpha)
     half = linalg.solve_triangular(
         chol, cross.reshape(p * m, n_new * p), lower=True, check_finite=False
     ).reshape(p * m, n_new, p)
-    diag = np.stack([np.diagonal(prior[j])[m:] for j in range(p)], axis=1)  # (P, p)
-    cov = -np.einsum("iak,ial->akl", half, half)
-    cov[:, np.arange(p), np.arange(p)] += diag
+    cov = own - np.einsum("iak,ial->akl", half, half)
     return mean, cov
 
 
@@ -135,6 +144,11 @@ class OutputDiscrepancy:
         ``1`` where two of these rows are the same period, else ``0``,
         ``(M, M)``: the correlation of the discrepancy's part independent
         between periods. [-]
+    sensitivity
+        ``F`` of an orthogonal discrepancy at any draw (the output's bases only),
+        else ``None``: the part over the conditions is then conditioned on being
+        orthogonal to the model's sensitivities at the draw's theta* over the
+        training periods (:mod:`bayescal.calibration.orthogonal`).
     """
 
     observations: ObservationModel
@@ -142,6 +156,7 @@ class OutputDiscrepancy:
     x_corr: FloatArray
     variances: FloatArray
     same_period: FloatArray
+    sensitivity: Sensitivity | None = None
 
     @classmethod
     def build(
@@ -168,12 +183,14 @@ class OutputDiscrepancy:
         x_obs = emulator.x[: observations.y_star.shape[1]]
         x_all = np.vstack([x_obs, np.atleast_2d(x_new)])
         kernels = emulator.kernels
+        orthogonal = q in observations.orthogonal_outputs
         return cls(
             observations,
             q,
             np.stack([kernels[j].x_corr(x_all) for j in bases]),
             np.array([kernels[j].variance for j in bases]),
             same_periods(x_all),
+            Sensitivity(emulator, x_obs.shape[0], [bases]) if orthogonal else None,
         )
 
     @property
@@ -186,6 +203,7 @@ class OutputDiscrepancy:
         values: Mapping[str, float],
         model: FloatArray,
         eta_cov: FloatArray | None = None,
+        theta: FloatArray | None = None,
     ) -> tuple[FloatArray, FloatArray]:
         """Shift and covariance of the predicted weights at one posterior draw.
 
@@ -201,6 +219,9 @@ class OutputDiscrepancy:
             The emulator's joint covariance of the weights over the training and
             predicted periods ``(p_o, M, M)`` (emulator route); ``None`` when the
             model is the simulator itself. [-]
+        theta
+            The draw's theta* on the unit scale ``(t,)``: needed by an orthogonal
+            discrepancy, whose constraint moves with it. [-]
 
         Returns
         -------
@@ -223,4 +244,14 @@ class OutputDiscrepancy:
             prior += (r0 * self.variances)[:, None, None] * self.same_period
         if eta_cov is not None:
             prior = prior + eta_cov
+        if self.sensitivity is not None:  # "orthogonal": delta_rel alone, constrained
+            if theta is None:
+                raise ValueError("an orthogonal discrepancy is conditioned at the draw's theta*")
+            f = self.sensitivity(theta, float(values["lambda"]))
+            r = float(values[obs.coordinate("delta_rel", q)])
+            full = constrained_prior((r * self.variances)[:, None, None] * self.x_corr, f)
+            own = prior - (r * self.variances)[:, None, None] * self.x_corr  # eta's part
+            p = own.shape[0]
+            full[np.arange(p), :, np.arange(p), :] += own
+            prior = full
         return krige_observed(measured - model, prior, obs.noise_block(q, lam, phi))

@@ -11,14 +11,17 @@ from collections.abc import Sequence
 
 import numpy as np
 from numpy.typing import ArrayLike
+from scipy import linalg
 
 from bayescal.calibration.batch import BatchErrors, check_batch_args, logpdf_loop
+from bayescal.calibration.orthogonal import constrained_covariance
 from bayescal.emulator.dense import (
     GridData,
     broadcast_obs_nuggets,
     calibration_covariance,
     dense_logpdf,
     gaussian_logdensity,
+    grid_inputs,
 )
 from bayescal.emulator.kernel import FloatArray, LogDensity, SeparableKernel
 
@@ -65,6 +68,7 @@ class DenseCalibrationDensity:
         a: ArrayLike,
         a_star: ArrayLike,
         delta: ArrayLike | None = None,
+        constraint: ArrayLike | None = None,
     ) -> LogDensity:
         """Log-density summed over bases for explicit nuggets.
 
@@ -78,8 +82,15 @@ class DenseCalibrationDensity:
             Observation nuggets, shape ``(p,)`` or ``(p, m_obs)``. [-]
         delta
             Model-discrepancy variance per basis ``(p,)`` or ``None``. [-]
+        constraint
+            ``F`` ``(p, m_obs, K)`` of an orthogonal discrepancy: its covariance
+            over all bases' observed weights is conditioned on ``F^T delta = 0``
+            directly (:func:`~bayescal.calibration.orthogonal.constrained_covariance`). [-]
         """
         d = self._data
+        if constraint is not None:
+            as_all = broadcast_obs_nuggets(a_star, d.n_bases, d.obs_index.size)
+            return self._joint(theta_star, a, as_all, [], delta, constraint)
         if d.w_star is None:
             raise ValueError("no observed weights: build with w_star for calibration")
         ts = np.asarray(theta_star, dtype=float).reshape(-1)
@@ -118,6 +129,7 @@ class DenseCalibrationDensity:
         a_star: ArrayLike,
         groups: Sequence[tuple[Sequence[int], FloatArray]],
         delta: ArrayLike | None = None,
+        constraint: ArrayLike | None = None,
     ) -> LogDensity:
         """Log-density with coupled observation noise within groups of bases (dense).
 
@@ -128,11 +140,25 @@ class DenseCalibrationDensity:
         :meth:`bayescal.calibration.kron.KronCalibrationDensity.pieces_grouped`.
         """
         d = self._data
+        as_arr = np.broadcast_to(np.asarray(a_star, dtype=float), (d.n_bases,))
+        as_all = np.repeat(as_arr[:, None], d.obs_index.size, axis=1)
+        return self._joint(theta_star, a, as_all, groups, delta, constraint)
+
+    def _joint(
+        self,
+        theta_star: ArrayLike,
+        a: ArrayLike,
+        as_arr: FloatArray,
+        groups: Sequence[tuple[Sequence[int], FloatArray]],
+        delta: ArrayLike | None,
+        constraint: ArrayLike | None,
+    ) -> LogDensity:
+        """One covariance over all bases' ``[w_j; w*_j]`` (``as_arr`` ``(p, m_obs)``)."""
+        d = self._data
         if d.w_star is None:
             raise ValueError("no observed weights: build with w_star for calibration")
         ts = np.asarray(theta_star, dtype=float).reshape(-1)
         a_arr = np.broadcast_to(np.asarray(a, dtype=float), (d.n_bases,))
-        as_arr = np.broadcast_to(np.asarray(a_star, dtype=float), (d.n_bases,))
         n_sim, m_obs = d.w.shape[0], d.obs_index.size
         block = n_sim + m_obs
         cov = np.zeros((d.n_bases * block, d.n_bases * block))
@@ -145,7 +171,7 @@ class DenseCalibrationDensity:
         )
         for j, kern in enumerate(d.kernels):
             rows = slice(j * block, (j + 1) * block)
-            nugget = 0.0 if j in grouped else float(as_arr[j])
+            nugget = np.zeros(m_obs) if j in grouped else as_arr[j]
             cov[rows, rows] = calibration_covariance(
                 d.theta,
                 d.x,
@@ -154,10 +180,16 @@ class DenseCalibrationDensity:
                 theta_star=ts,
                 obs_index=d.obs_index,
                 a_star=nugget,
-                delta=float(dl[j]),
+                delta=float(dl[j]) if constraint is None else 0.0,
             )
             vec[rows] = np.concatenate([d.w[:, j], d.w_star[:, j]])
         period = np.arange(m_obs)
+        if constraint is not None:  # Sigma_perp over every basis's observed rows, directly
+            obs_rows = (np.arange(d.n_bases)[:, None] * block + n_sim + period).ravel()
+            x_obs = d.x[d.obs_index]
+            sigma = linalg.block_diag(*[dl[j] * k.x_corr(x_obs) for j, k in enumerate(d.kernels)])
+            f = np.asarray(constraint, float).reshape(d.n_bases * m_obs, -1)
+            cov[np.ix_(obs_rows, obs_rows)] += constrained_covariance(sigma, f)
         for members, noise in groups:
             for aj, j in enumerate(members):
                 for ak, k in enumerate(members):
@@ -165,6 +197,27 @@ class DenseCalibrationDensity:
                     rk = k * block + n_sim + period
                     cov[rj, rk] += noise[aj, ak]
         return gaussian_logdensity(cov, vec)
+
+    def mean_gradient(self, theta_star: ArrayLike, a: ArrayLike) -> FloatArray:
+        """``d mean / d theta*`` of the emulator's weights at the observed periods,
+        ``(p, m_obs, t)``: the dense GP mean ``k(z)^T (S + a I)^-1 w`` differentiated. [-]"""
+        d = self._data
+        ts = np.asarray(theta_star, dtype=float).reshape(-1)
+        a_arr = np.broadcast_to(np.asarray(a, dtype=float), (d.n_bases,))
+        z = grid_inputs(d.theta, d.x)
+        x_obs = d.x[d.obs_index]
+        z_obs = np.hstack([np.tile(ts, (x_obs.shape[0], 1)), x_obs])
+        n_t = ts.size
+        out = np.empty((d.n_bases, x_obs.shape[0], n_t))
+        for j, kern in enumerate(d.kernels):
+            cov = kern.full(z)
+            cov[np.diag_indices_from(cov)] += a_arr[j]
+            alpha = linalg.solve(cov, d.w[:, j], assume_a="pos")
+            cross = kern.full(z, z_obs)  # (N, m_obs)
+            for k in range(n_t):
+                slope = 2.0 * kern.beta_theta[k] * (z[:, k] - ts[k])  # d/d theta*_k
+                out[j, :, k] = (cross * slope[:, None]).T @ alpha
+        return out
 
     def stacked_grid(self) -> None:
         """No stacked grid: the dense reference factorises the whole covariance."""

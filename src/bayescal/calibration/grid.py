@@ -224,6 +224,16 @@ class StackedGrid:
         return self.variance[:, None] * self.l_x
 
     @cached_property
+    def p_obs(self) -> FloatArray:
+        """``Q_x[O, :]`` per basis ``(p, m_obs, m*)``."""
+        return np.stack([b.p_obs for b in self.bases])
+
+    @cached_property
+    def sx_obs(self) -> FloatArray:
+        """``S_x[O, O]`` per basis ``(p, m_obs, m_obs)``."""
+        return np.stack([b.sx_obs for b in self.bases])
+
+    @cached_property
     def l_x2(self) -> FloatArray:
         """``l_x^2`` per basis ``(p, m*)``."""
         return self.l_x * self.l_x

@@ -128,6 +128,7 @@ class HeldOutAlgebra:
         a: ArrayLike,
         a_star: ArrayLike,
         delta: ArrayLike | None = None,
+        constraint: ArrayLike | None = None,
     ) -> LogDensity:
         """Not offered (only :meth:`logpdf`)."""
         raise NotImplementedError("the held-out shortcut offers logpdf only")
@@ -139,7 +140,12 @@ class HeldOutAlgebra:
         a_star: ArrayLike,
         groups: Sequence[tuple[Sequence[int], FloatArray]],
         delta: ArrayLike | None = None,
+        constraint: ArrayLike | None = None,
     ) -> LogDensity:
+        """Not offered (only :meth:`logpdf`)."""
+        raise NotImplementedError("the held-out shortcut offers logpdf only")
+
+    def mean_gradient(self, theta_star: ArrayLike, a: ArrayLike) -> FloatArray:
         """Not offered (only :meth:`logpdf`)."""
         raise NotImplementedError("the held-out shortcut offers logpdf only")
 

@@ -50,7 +50,7 @@ from dataclasses import dataclass
 from typing import Any, Literal, Protocol
 
 import numpy as np
-from numpy.typing import ArrayLike
+from numpy.typing import ArrayLike, NDArray
 from scipy import linalg
 from scipy.linalg import lapack
 
@@ -64,6 +64,7 @@ from bayescal.calibration.batch import (
 )
 from bayescal.calibration.dense import DenseCalibrationDensity
 from bayescal.calibration.grid import BasisPieces, StackedGrid
+from bayescal.calibration.orthogonal import Woodbury, rotated_gradient
 from bayescal.emulator.dense import GridData, broadcast_obs_nuggets
 from bayescal.emulator.kernel import FloatArray, LogDensity, SeparableKernel
 from bayescal.emulator.kron import Lru, SymEig, positive_log_sum
@@ -102,11 +103,13 @@ def _schur_basis(
     a_star: FloatArray,
     full_grid: bool,
     delta: float = 0.0,
+    acc: tuple[Woodbury, int] | None = None,
 ) -> LogDensity:
     """One basis by the Schur complement of the Kronecker simulator block.
 
     ``delta`` adds ``delta S_x[O, O]`` to the observed block: a discrepancy
-    ``GP(0, delta c_x)`` over the periods' conditions.
+    ``GP(0, delta c_x)`` over the periods' conditions; ``acc`` gathers the
+    orthogonal constraint's pieces of this basis (:mod:`~bayescal.calibration.orthogonal`).
     """
     lx = cache.eig_x.values
     logdet, quad = sim.logdet, sim.quad
@@ -115,7 +118,7 @@ def _schur_basis(
     g = lx * lx * ((c_hat * c_hat) @ sim.inv_den)
     size = sim.h.size + a_star.size
     variance = cache.kernel.variance + delta
-    if full_grid and a_star.min() == a_star.max():
+    if full_grid and a_star.min() == a_star.max() and acc is None:
         schur = variance * lx + a_star[0] - g
         resid = cache.obs_rot - u
         logdet += positive_log_sum(schur, "observed-block Schur complement")
@@ -132,6 +135,8 @@ def _schur_basis(
         ) from exc
     half = linalg.solve_triangular(chol, resid, lower=True, check_finite=False)
     logdet += 2.0 * float(np.sum(np.log(np.diag(chol))))
+    if acc is not None:
+        acc[0].factored([acc[1]], chol, half, rotated=False)
     return LogDensity.from_pieces(logdet, quad + float(half @ half), size)
 
 
@@ -141,6 +146,7 @@ def _grouped_bases(
     cs: Sequence[FloatArray],
     noise: FloatArray,
     deltas: Sequence[float],
+    acc: tuple[Woodbury, list[int]] | None = None,
 ) -> LogDensity:
     """Bases whose observed weights share a noise block, by one joint Schur complement.
 
@@ -177,6 +183,8 @@ def _grouped_bases(
         ) from exc
     half = linalg.solve_triangular(chol, resid, lower=True, check_finite=False)
     logdet += 2.0 * float(np.sum(np.log(np.diag(chol))))
+    if acc is not None:
+        acc[0].factored(acc[1], chol, half, rotated=False)
     return LogDensity.from_pieces(logdet, quad + float(half @ half), size)
 
 
@@ -188,6 +196,7 @@ def _finish_grouped(
     a_star: FloatArray,
     groups: Sequence[tuple[list[int], FloatArray, FloatArray]],
     delta: FloatArray,
+    acc: Woodbury | None = None,
 ) -> LogDensity:
     """:func:`_finish` where some bases' observed weights share a noise block (full grid).
 
@@ -207,7 +216,12 @@ def _finish_grouped(
         free[idx] = False
     if free.any():
         part = _diagonal_schur(
-            variance[free], grid.l_x[free], a_star[free], g[free], grid.obs_rot[free] - u[free]
+            variance[free],
+            grid.l_x[free],
+            a_star[free],
+            g[free],
+            grid.obs_rot[free] - u[free],
+            None if acc is None else (acc, np.flatnonzero(free)),
         )
         logdet += part[0]
         quad += part[1]
@@ -224,6 +238,8 @@ def _finish_grouped(
         half = lapack.dtrtrs(chol, resid, lower=1)[0]
         logdet += 2.0 * float(np.sum(np.log(chol.flat[:: q * m + 1])))
         quad += float(half @ half)
+        if acc is not None:
+            acc.factored(idx, chol, half, rotated=True)
     return LogDensity.from_pieces(logdet, quad, size)
 
 
@@ -275,10 +291,12 @@ def _finish(
     g: FloatArray,
     a_star: FloatArray,
     delta: FloatArray | None = None,
+    acc: Woodbury | None = None,
 ) -> LogDensity:
     """Add the observed block's Schur complement (diagonal in the rotated basis)."""
     variance = grid.variance if delta is None else grid.variance + delta
-    logdet, quad = _diagonal_schur(variance, grid.l_x, a_star, g, grid.obs_rot - u)
+    everything = None if acc is None else (acc, np.arange(grid.n_bases))
+    logdet, quad = _diagonal_schur(variance, grid.l_x, a_star, g, grid.obs_rot - u, everything)
     logdet += sum(sim.logdet for sim in sims)
     quad += sum(sim.quad for sim in sims)
     size = sum(sim.h.size for sim in sims) + grid.obs_rot.size
@@ -286,16 +304,24 @@ def _finish(
 
 
 def _diagonal_schur(
-    variance: FloatArray, l_x: FloatArray, a_star: FloatArray, g: FloatArray, resid: FloatArray
+    variance: FloatArray,
+    l_x: FloatArray,
+    a_star: FloatArray,
+    g: FloatArray,
+    resid: FloatArray,
+    acc: tuple[Woodbury, NDArray[np.intp]] | None = None,
 ) -> tuple[float, float]:
     """Log-determinant and quadratic form of bases whose Schur complement is diagonal.
 
     In the rotated bases (full grid, white noise) basis ``j``'s observed block is
-    ``(tau_j^-1 + delta_j) l_x,j + a*_j - g_j``; ``resid`` is ``z_j - u_j``.
+    ``(tau_j^-1 + delta_j) l_x,j + a*_j - g_j``; ``resid`` is ``z_j - u_j``;
+    ``acc`` gathers the orthogonal constraint's pieces of these bases.
     """
     schur = variance[:, None] * l_x
     schur += a_star[:, None]
     schur -= g
+    if acc is not None:
+        acc[0].diagonal(list(acc[1]), schur, resid)
     return (
         positive_log_sum(schur, "observed-block Schur complement"),
         float(np.vdot(resid, resid / schur)),
@@ -414,6 +440,7 @@ class KronCalibrationDensity:
         a_star: ArrayLike,
         groups: Sequence[tuple[Sequence[int], FloatArray]],
         delta: ArrayLike | None = None,
+        constraint: ArrayLike | None = None,
     ) -> LogDensity:
         """Log-density when some bases' observed weights share a noise block per period.
 
@@ -430,6 +457,8 @@ class KronCalibrationDensity:
             ``(q, q)`` of their observed weights' noise in every period. [-]
         delta
             Model-discrepancy variance per basis ``(p,)`` (see :meth:`pieces_nuggets`). [-]
+        constraint
+            ``F`` of an orthogonal discrepancy (see :meth:`pieces_nuggets`). [-]
         """
         if self._method != "schur":
             raise ValueError("grouped observation noise needs method 'schur'")
@@ -443,6 +472,7 @@ class KronCalibrationDensity:
             if delta is None
             else np.broadcast_to(np.asarray(delta, float), (d.n_bases,))
         )
+        acc = None if constraint is None else Woodbury(self._grid, np.asarray(constraint), dl)
         if self._full_grid:  # through the memos, every block in the rotated bases
             grid = self._grid
             a_c = np.ascontiguousarray(a_arr)
@@ -456,7 +486,8 @@ class KronCalibrationDensity:
                 (list(bases), np.asarray(noise, float), self._overlap(tuple(bases)))
                 for bases, noise in groups
             ]
-            return _finish_grouped(grid, sims, u, g, np.asarray(as_arr), parts, np.asarray(dl))
+            out = _finish_grouped(grid, sims, u, g, np.asarray(as_arr), parts, np.asarray(dl), acc)
+            return out if acc is None else out + acc.finish()
         diff = d.theta - ts
         bases = self._grid.bases
         cs = [b.kernel.variance * np.exp(-((diff * diff) @ b.beta_theta)) for b in bases]
@@ -465,7 +496,9 @@ class KronCalibrationDensity:
             if j not in grouped:
                 nug = np.full(d.obs_index.size, float(as_arr[j]))
                 sim = self._sim(j, float(a_arr[j]))
-                total = total + _schur_basis(cache, sim, cs[j], nug, self._full_grid, float(dl[j]))
+                total = total + _schur_basis(
+                    cache, sim, cs[j], nug, False, float(dl[j]), None if acc is None else (acc, j)
+                )
         for members, noise in groups:
             idx = list(members)
             sims = [self._sim(j, float(a_arr[j])) for j in idx]
@@ -475,8 +508,9 @@ class KronCalibrationDensity:
                 [cs[j] for j in idx],
                 np.asarray(noise, float),
                 [float(dl[j]) for j in idx],
+                None if acc is None else (acc, idx),
             )
-        return total
+        return total if acc is None else total + acc.finish()
 
     def pieces_nuggets(
         self,
@@ -484,6 +518,7 @@ class KronCalibrationDensity:
         a: ArrayLike,
         a_star: ArrayLike,
         delta: ArrayLike | None = None,
+        constraint: ArrayLike | None = None,
     ) -> LogDensity:
         """Log-density summed over bases for explicit nuggets.
 
@@ -500,9 +535,18 @@ class KronCalibrationDensity:
             Variance of a model discrepancy per basis ``(p,)``: the observed
             weights get ``delta_j c_x(x, x')`` more covariance (a GP over the
             periods' conditions, independent of the simulator); ``None``: none. [-]
+        constraint
+            ``F`` ``(p, m_obs, K)``: the discrepancy is conditioned on ``sum_j F_j^T
+            delta_j = 0`` (the orthogonal discrepancy,
+            :mod:`~bayescal.calibration.orthogonal`); needs ``delta``. [-]
         """
         d = self._data
         dl = None if delta is None else np.broadcast_to(np.asarray(delta, float), (d.n_bases,))
+        acc = None
+        if constraint is not None:
+            if dl is None or self._method != "schur":
+                raise ValueError("an orthogonal discrepancy needs delta and method 'schur'")
+            acc = Woodbury(self._grid, np.asarray(constraint, float), np.asarray(dl))
         ts = np.asarray(theta_star, dtype=float).reshape(1, -1)
         a_arr = np.asarray(a, dtype=float)
         if a_arr.shape != (d.n_bases,):
@@ -511,7 +555,7 @@ class KronCalibrationDensity:
         if self._full_grid and self._method == "schur" and uniform is not None:
             if not (a_arr.min() > 0.0 and uniform.min() > 0.0):
                 raise ValueError("nuggets a and a* must be > 0")
-            return self._stacked_pieces(ts, a_arr, uniform, dl)
+            return self._stacked_pieces(ts, a_arr, uniform, dl, acc)
         as_arr = broadcast_obs_nuggets(a_star, d.n_bases, d.obs_index.size)
         if not (np.all(a_arr > 0.0) and np.all(as_arr > 0.0)):
             raise ValueError("nuggets a and a* must be > 0")
@@ -526,9 +570,10 @@ class KronCalibrationDensity:
             else:
                 sim = self._sim(j, float(a_arr[j]))
                 extra = 0.0 if dl is None else float(dl[j])
-                part = _schur_basis(cache, sim, c, as_arr[j], self._full_grid, extra)
+                basis = None if acc is None else (acc, j)
+                part = _schur_basis(cache, sim, c, as_arr[j], self._full_grid, extra, basis)
             total = total + part
-        return total
+        return total if acc is None else total + acc.finish()
 
     def _uniform_obs_nuggets(self, a_star: ArrayLike) -> FloatArray | None:
         """``a*`` as one value per basis ``(p,)`` if it is uniform over periods, else None."""
@@ -545,7 +590,12 @@ class KronCalibrationDensity:
         return None
 
     def _stacked_pieces(
-        self, ts: FloatArray, a: FloatArray, a_star: FloatArray, delta: FloatArray | None = None
+        self,
+        ts: FloatArray,
+        a: FloatArray,
+        a_star: FloatArray,
+        delta: FloatArray | None = None,
+        acc: Woodbury | None = None,
     ) -> LogDensity:
         """The full-grid path with uniform ``a*``, through the memos."""
         grid = self._grid
@@ -553,7 +603,22 @@ class KronCalibrationDensity:
         sims = [self._sim(j, float(a_j)) for j, a_j in enumerate(a)]
         c_hat = self._c_hat_memo.get(ts_key, lambda: _c_hat(grid, ts))
         u, g = self._u_g_memo.get(ts_key + a_key, lambda: _u_g(grid, c_hat, sims))
-        return _finish(grid, sims, u, g, a_star, delta)
+        out = _finish(grid, sims, u, g, a_star, delta, acc)
+        return out if acc is None else out + acc.finish()
+
+    def mean_gradient(self, theta_star: ArrayLike, a: ArrayLike) -> FloatArray:
+        """``d mean / d theta*`` of the emulator's weights at the observed periods.
+
+        The mean of eq. 12's observed weights given the simulator weights (nuggets
+        ``a``), differentiated analytically
+        (:func:`~bayescal.calibration.orthogonal.rotated_gradient`),
+        ``(p, m_obs, t)``. [-]
+        """
+        a_arr = np.broadcast_to(np.asarray(a, dtype=float), (self._data.n_bases,))
+        hs = [self._sim(j, float(a_j)).h for j, a_j in enumerate(a_arr)]
+        rot = rotated_gradient(self._grid, np.asarray(theta_star, float), hs)
+        out: FloatArray = self._grid.p_obs @ rot
+        return out
 
     def _overlap(self, bases: tuple[int, ...]) -> FloatArray:
         """``Q_x,j^T Q_x,k`` of a noise group's bases, ``(q, m*, q, m*)`` (fixed, kept)."""
@@ -668,7 +733,10 @@ class CalibrationAlgebra(Protocol):
         a: ArrayLike,
         a_star: ArrayLike,
         delta: ArrayLike | None = None,
+        constraint: ArrayLike | None = None,
     ) -> LogDensity: ...
+
+    def mean_gradient(self, theta_star: ArrayLike, a: ArrayLike) -> FloatArray: ...
 
     def pieces(self, theta_star: ArrayLike, lam: float, lam_star: ArrayLike) -> LogDensity: ...
 
@@ -679,6 +747,7 @@ class CalibrationAlgebra(Protocol):
         a_star: ArrayLike,
         groups: Sequence[tuple[Sequence[int], FloatArray]],
         delta: ArrayLike | None = None,
+        constraint: ArrayLike | None = None,
     ) -> LogDensity: ...
 
     def logpdf(self, theta_star: ArrayLike, lam: float, lam_star: ArrayLike) -> float: ...

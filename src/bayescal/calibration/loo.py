@@ -28,12 +28,13 @@ period is unreliable: the report says so).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import NDArray
 from scipy import special
 
+from bayescal.calibration.orthogonal import Sensitivity, constrained_prior
 from bayescal.calibration.posterior import Posterior
 from bayescal.emulator.gp import Emulator
 from bayescal.emulator.kernel import LOG_2PI
@@ -107,11 +108,14 @@ def pointwise_scores(
     variances = np.array([k.variance for k in kernels])
     ls_weights = obs.ls_weights()
     x_corr = np.stack([k.x_corr(x[:m]) for k in kernels]) if obs.delta_over_conditions else None
+    orthogonal = [obs.outputs[q].bases for q in obs.orthogonal_outputs]
+    sensitivity = Sensitivity(emulator, m, orthogonal) if orthogonal else None
     for c in range(chains):
         for s in range(pick.size):
             mean, var = emulator.predict_weights(np.broadcast_to(unit[c, s], (m, unit.shape[2])), x)
             values = dict(zip(names, aux[c, s], strict=True))
-            parts = _left_out(obs, values, mean, var, variances, ls_weights, x_corr)
+            f = None if sensitivity is None else sensitivity(unit[c, s], values["lambda"])
+            parts = _left_out(obs, values, mean, var, variances, ls_weights, x_corr, f)
             out[c, s] = _densities(obs, parts)  # period_log_densities, once per draw
             mus[c, s], sds[c, s] = _predictive(obs, mean, parts)  # period_predictive
     return out, mus, sds
@@ -155,6 +159,7 @@ def period_log_densities(
     variances: FloatArray,
     ls_weights: FloatArray,
     x_corr: FloatArray | None = None,
+    constraint: FloatArray | None = None,
 ) -> FloatArray:
     """Log density of every period's measurements ``(m*,)`` at one draw.
 
@@ -178,8 +183,12 @@ def period_log_densities(
         discrepancy over the conditions is then kriged from the other periods'
         residuals, as the predictions do (:func:`loo_conditional`); ``None``:
         its marginal. [-]
+    constraint
+        ``F`` ``(p, m*, K)`` of the orthogonal discrepancies at the draw
+        (:class:`~bayescal.calibration.orthogonal.Sensitivity`); needs ``x_corr``. [-]
     """
-    return _densities(obs, _left_out(obs, values, mean, var, variances, ls_weights, x_corr))
+    parts = _left_out(obs, values, mean, var, variances, ls_weights, x_corr, constraint)
+    return _densities(obs, parts)
 
 
 def _left_out(
@@ -190,11 +199,14 @@ def _left_out(
     variances: FloatArray,
     ls_weights: FloatArray,
     x_corr: FloatArray | None,
+    constraint: FloatArray | None = None,
 ) -> list[tuple[_OutputPart, FloatArray, FloatArray]]:
     """Each output's pieces and its periods' left-out residual weights and covariance."""
     out = []
     for q in range(obs.n_outputs):
         part = _OutputPart.of(obs, q, values, mean, var, variances, ls_weights, x_corr)
+        if q in obs.orthogonal_outputs:
+            part = part.orthogonal(obs, q, constraint)
         out.append((part, *part.left_out()))
     return out
 
@@ -223,6 +235,7 @@ def period_predictive(
     variances: FloatArray,
     ls_weights: FloatArray,
     x_corr: FloatArray | None = None,
+    constraint: FloatArray | None = None,
 ) -> tuple[FloatArray, FloatArray]:
     """Each left-out period's predictive mean and SD of every measured sample at one draw.
 
@@ -236,7 +249,7 @@ def period_predictive(
 
     Parameters
     ----------
-    obs, values, mean, var, variances, ls_weights, x_corr
+    obs, values, mean, var, variances, ls_weights, x_corr, constraint
         As :func:`period_log_densities`.
 
     Returns
@@ -244,7 +257,8 @@ def period_predictive(
     mu, sd
         ``(n, m*)`` each, in the standardised units of ``obs.y_star``. [-]
     """
-    return _predictive(obs, mean, _left_out(obs, values, mean, var, variances, ls_weights, x_corr))
+    parts = _left_out(obs, values, mean, var, variances, ls_weights, x_corr, constraint)
+    return _predictive(obs, mean, parts)
 
 
 def _predictive(
@@ -272,7 +286,8 @@ class _OutputPart:
     diff: FloatArray  # measured minus predicted weights (m*, p_o)
     own: FloatArray  # covariance of a period's true weights alone (m*, p_o, p_o)
     noise: FloatArray  # the observed weights' noise (p_o, p_o)
-    kriged: FloatArray | None  # r tau^-1 c_x per basis (p_o, m*, m*), or None
+    kriged: FloatArray | None  # r tau^-1 c_x per basis (p_o, m*, m*) [orthogonal:
+    # the constrained covariance (p_o, m*, p_o, m*)], or None
     lam: float
     rss: FloatArray  # out-of-basis sum of squares per period (m*,)
     logdets: tuple[float, float]  # log|R|, log|H0|
@@ -323,6 +338,15 @@ class _OutputPart:
         rss = np.sum(resid * resid, axis=0)  # per period
         return cls(kq, w_hat - mean[:, bases], own, noise, kriged, lam, rss, logdets, o.n)
 
+    def orthogonal(self, obs: ObservationModel, q: int, f: FloatArray | None) -> _OutputPart:
+        """The same with the discrepancy over the conditions constrained orthogonal to the
+        model's sensitivities (``f``: ``F`` of every orthogonal output, ``(p, m*, K)``)."""
+        if self.kriged is None or f is None:
+            raise ValueError("an orthogonal discrepancy needs x_corr and its constraint")
+        bases = list(obs.outputs[q].bases)
+        cols = np.flatnonzero(np.any(f[bases] != 0.0, axis=(0, 1)))
+        return replace(self, kriged=constrained_prior(self.kriged, f[bases][:, :, cols]))
+
     def left_out(self) -> tuple[FloatArray, FloatArray]:
         """Each period's measured weights minus their prediction from the others, and its
         covariance: ``(m*, p_o)``, ``(m*, p_o, p_o)``."""
@@ -347,7 +371,8 @@ def loo_conditional(
 
     The residual weights ``e = w_hat - mu`` ``(m*, p_o)`` are Gaussian with
     covariance ``Sigma = G + blockdiag_i(B_i)``: ``G`` the discrepancy over the
-    conditions, ``prior[j] = r tau_j^-1 c_x`` ``(p_o, m*, m*)`` per basis, ``B_i``
+    conditions, ``prior[j] = r tau_j^-1 c_x`` ``(p_o, m*, m*)`` per basis (or one
+    ``(p_o, m*, p_o, m*)`` with the bases correlated), ``B_i``
     ``(m*, p_o, p_o)`` what belongs to period ``i`` alone (the emulator's
     variance, the observed weights' noise, a discrepancy independent between
     periods). Period ``i`` given the others is ``N(e_i - P_ii^-1 u_i, P_ii^-1)``
@@ -361,7 +386,9 @@ def loo_conditional(
     """
     m, p = diff.shape
     sigma = np.zeros((m, p, m, p))  # period-major
-    for j in range(p):
+    if prior.ndim == 4:  # bases correlated a priori (basis-major, the orthogonal discrepancy)
+        sigma += prior.transpose(1, 0, 3, 2)
+    for j in range(p if prior.ndim == 3 else 0):
         sigma[:, j, :, j] = prior[j]
     sigma[np.arange(m), :, np.arange(m), :] += blocks
     flat = sigma.reshape(m * p, m * p)

@@ -31,6 +31,7 @@ from numpy.typing import ArrayLike, NDArray
 from bayescal.calibration.batch import BatchSession
 from bayescal.calibration.grid import StackedGrid
 from bayescal.calibration.kron import CalibrationAlgebra, Kind, make_algebra
+from bayescal.calibration.orthogonal import constraint_matrix
 from bayescal.calibration.priors import CalibrationPriors
 from bayescal.design import Prior
 from bayescal.emulator.gp import Emulator
@@ -118,10 +119,12 @@ class CalibrationPosterior:
 
     def _reset(self) -> None:
         self._observed_memo = Lru(2)
+        self._constraint_memo = Lru(2)
 
     def __getstate__(self) -> dict[str, Any]:
         state = self.__dict__.copy()
         state.pop("_observed_memo")
+        state.pop("_constraint_memo")
         return state
 
     def __setstate__(self, state: dict[str, Any]) -> None:
@@ -206,8 +209,9 @@ class CalibrationPosterior:
         delta, independent = self._delta(arr[t + 1 + n_out + n_phi :])
         if independent is not None:  # no covariance between periods: a period's noise block
             a_star = a_star + independent
+        constraint = self._constraint(arr[:t], a)
         if not self.coupled:
-            return self.algebra.pieces_nuggets(arr[:t], a, a_star, delta).logpdf
+            return self.algebra.pieces_nuggets(arr[:t], a, a_star, delta, constraint).logpdf
         phi = arr[t + 1 + n_out : t + 1 + n_out + n_phi]
         algebra, pieces = self._observed_memo.get(phi.tobytes(), lambda: self._observed(phi))
         groups = [
@@ -220,10 +224,24 @@ class CalibrationPosterior:
             )
             for q, piece in zip(obs.ar_outputs, pieces, strict=True)
         ]
-        total = algebra.pieces_grouped(arr[:t], a, a_star, groups, delta).logpdf
+        total = algebra.pieces_grouped(arr[:t], a, a_star, groups, delta, constraint).logpdf
         for q, piece in zip(obs.ar_outputs, pieces, strict=True):
             total += obs.remainder(q, piece, float(lam_star[q]))
         return total
+
+    def _constraint(self, theta_star: FloatArray, a: FloatArray) -> FloatArray | None:
+        """``F`` of the orthogonal discrepancies at theta* (recomputed wherever theta* or
+        ``lambda`` moved: the model's sensitivities move with them), else None."""
+        obs = self.observations
+        if obs is None or not obs.orthogonal_outputs:
+            return None
+        bases = [obs.outputs[q].bases for q in obs.orthogonal_outputs]
+        ktk = self.algebra.data.ktk
+        f: FloatArray = self._constraint_memo.get(
+            theta_star.tobytes() + a.tobytes(),
+            lambda: constraint_matrix(self.algebra.mean_gradient(theta_star, a), ktk, bases),
+        )
+        return f if f.shape[2] else None
 
     def _delta(self, rel: FloatArray) -> tuple[FloatArray | None, FloatArray | None]:
         """Per-basis discrepancy variances ``r_o tau_j^-1`` from the outputs' ``r``:

@@ -44,13 +44,16 @@ class OutputError(Section):
         default=None,
     )
 
-    discrepancy: bool | Literal["conditions", "independent", "both"] = field_doc(
+    discrepancy: bool | Literal["conditions", "independent", "both", "orthogonal"] = field_doc(
         "Add a model discrepancy to this output inside the calibration's likelihood. "
         "true or 'conditions': a Gaussian process over the periods' conditions x with the "
         "emulator's correlation and a sampled variance (log-uniform prior from 1e-8 to 1 of "
         "the emulator's), so similar days share their misfit; 'independent': a misfit of "
         "its own in every period (no correlation between periods), which a test day cannot "
-        "borrow from the training days; 'both': their sum, each variance sampled. "
+        "borrow from the training days; 'both': their sum, each variance sampled; "
+        "'orthogonal': the one over the conditions constrained orthogonal to the model's "
+        "sensitivities in the parameters at the sampled parameters (Plumlee 2017), so that "
+        "it cannot stand in for a change of the parameters. "
         "Systematic misfit then widens the parameters' intervals instead of biasing them "
         "with false confidence. Choose by cross-validation on the training periods "
         "(bayescal compare).",

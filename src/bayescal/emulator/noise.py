@@ -81,15 +81,18 @@ PHI_MAX = 0.999
 DELTA_RANGE = (1e-8, 1.0)
 
 DeltaCoordinate = Literal["delta_rel", "delta_ind"]
-DiscrepancyKind = Literal["conditions", "independent", "both"]
+DiscrepancyKind = Literal["conditions", "independent", "both", "orthogonal"]
 
 #: The variance coordinates of each kind of in-likelihood discrepancy:
 #: ``delta_rel`` scales the GP over the periods' conditions, ``delta_ind`` the
-#: part independent from period to period.
+#: part independent from period to period. ``"orthogonal"`` is the GP over the
+#: conditions constrained orthogonal to the model's sensitivities (Plumlee 2017,
+#: :mod:`bayescal.calibration.orthogonal`).
 DISCREPANCY_PARTS: dict[str, tuple[DeltaCoordinate, ...]] = {
     "conditions": ("delta_rel",),
     "independent": ("delta_ind",),
     "both": ("delta_rel", "delta_ind"),
+    "orthogonal": ("delta_rel",),
 }
 
 
@@ -203,7 +206,9 @@ class OutputNoise:
         conditions, ``"independent"`` one independent from period to period
         (covariance ``r_0 tau_j^-1`` within a period, none between periods),
         ``"both"`` their sum, each relative variance sampled (coordinates
-        ``delta_rel`` and ``delta_ind``); ``False``: none.
+        ``delta_rel`` and ``delta_ind``), ``"orthogonal"`` the GP over the
+        conditions constrained orthogonal to the model's sensitivities in theta*
+        (Plumlee 2017; coordinate ``delta_rel``); ``False``: none.
     """
 
     name: str
@@ -379,6 +384,11 @@ class ObservationModel:
     def delta_outputs(self) -> tuple[int, ...]:
         """Indices of the outputs with a model discrepancy (one or two ``r`` coordinates)."""
         return tuple(q for q, o in enumerate(self.outputs) if o.discrepancy)
+
+    @cached_property
+    def orthogonal_outputs(self) -> tuple[int, ...]:
+        """Indices of the outputs whose discrepancy is orthogonal (Plumlee 2017)."""
+        return tuple(q for q, o in enumerate(self.outputs) if o.discrepancy == "orthogonal")
 
     @property
     def delta_over_conditions(self) -> bool:

@@ -404,14 +404,14 @@ def conditioned_discrepancy(
             if runs is not None:
                 y_sim = assembled.layout.cut(np.asarray(runs[name][s], float))
                 y_sim = (y_sim - st.mean[:, None]) / st.sd[:, None]
-                shift, cov = field.condition(values, obs.weights_of(q, y_sim, phi))
+                shift, cov = field.condition(values, obs.weights_of(q, y_sim, phi), None, unit[s])
                 w_new, extra = shift, np.zeros_like(excess)
                 offset = np.zeros(ko.shape[0])
             else:
                 theta = np.broadcast_to(unit[s], (x_all.shape[0], t))
                 w_all = emulator.predict_weights(theta, x_all)[0][:, bases]
                 eta = emulator.weight_covariance(unit[s], x_all, bases)
-                shift, cov = field.condition(values, w_all[:m], eta)
+                shift, cov = field.condition(values, w_all[:m], eta, unit[s])
                 w_new, extra = w_all[m:] + shift, excess
                 offset = st.mean
             mu = offset[:, None] + st.sd[:, None] * (ko @ w_new.T)  # (n_o, P)

@@ -47,6 +47,7 @@ DISCREPANCY_KINDS = {
     "conditions": "over the periods' conditions",
     "independent": "independent from period to period",
     "both": "over the conditions plus one independent per period",
+    "orthogonal": "over the conditions, orthogonal to the parameters' effects",
 }
 MODEL_TITLES = {"nominal": "nominal (catalogue)", "calibrated": "calibrated"}
 
