@@ -85,7 +85,7 @@ def check_route(ctx: Context, em: EmulatorResult, posterior: Posterior) -> Route
     theta, _, pick = thin_draws(posterior, section.runs)  # the simulator route's draws
     sub = check_draws(section.runs, section.check_runs, len(pick))
     theta, pick = theta[sub], pick[sub]
-    sims = simulate(ctx, Design.from_values(ctx.priors, theta))
+    sims = simulate(ctx, Design.from_values(ctx.priors, theta), need=1)
     names = list(em.emulator.outputs.names)
     runs = level_values(ctx, {o: sims.outputs[o] for o in names}, "simulated")
     assembled = em.assembled

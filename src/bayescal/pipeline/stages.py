@@ -208,8 +208,11 @@ def _runner_options(ctx: Context) -> dict[str, Any]:
     }
 
 
-def simulate(ctx: Context, design: Design) -> RunResults:
+def simulate(ctx: Context, design: Design, need: int | None = None) -> RunResults:
     """Run the design (cached per run in ``out/simulations``); too many failures raise.
+
+    ``need``: the fewest successful runs accepted (default: parameters + 2, what
+    the emulator needs).
 
     Raises
     ------
@@ -229,7 +232,7 @@ def simulate(ctx: Context, design: Design) -> RunResults:
         )
     finally:
         close()
-    need = len(design.names) + 2
+    need = len(design.names) + 2 if need is None else need
     ok = design.runs - results.n_failed
     if ok < need:
         first = results.failures[0] if results.failures else None
