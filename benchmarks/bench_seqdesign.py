@@ -12,10 +12,11 @@ script calibrates
   calibration of each step (the quick posteriors the loop steers by), and the
   pipeline's full calibration on the final design is run too.
 
-It prints one table per example: per design the runs, the wall time, and per
-parameter the posterior mean, its distance from the reference mean in reference
-SDs, and the 95 % interval width relative to the reference (the largest one-shot
-design, calibrated in the same run of this script). The quick steps of the
+It prints one table per example (as soon as that example is done, the figure
+redrawn): per design the runs, the wall time, and per parameter the posterior
+mean, its distance from the reference mean in reference SDs, and the 95 % interval
+width relative to the reference (the largest one-shot design, calibrated in the
+same run of this script). The quick steps of the
 sequential design give a mean and SD only: their width is 3.92 SD (marked ``~``).
 The figure (``--figure``, default ``seqdesign.png``) shows mean ± 2 SD against the
 number of runs for both, with the truth.
@@ -240,7 +241,7 @@ def figure(results: dict[str, tuple[Case, list[Point], list[Point]]], path: Path
     fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=110)
-    print(f"\nfigure: {path}")
+    print(f"figure: {path}")
 
 
 def main() -> None:
@@ -268,9 +269,8 @@ def main() -> None:
             sizes = QUICK_SIZES.get(name, case.sizes) if opts.quick else case.sizes
             one, seq = bench(case, parent, sizes)
             results[name] = (case, one, seq)
-    for case, one, seq in results.values():
-        print_table(case, one, seq)
-    figure(results, opts.figure)
+            print_table(case, one, seq)  # each example's table as soon as it is done
+            figure(results, opts.figure)
     print(
         f"{time.perf_counter() - start:.0f} s in all (CPU {cpu_seconds() - cpu0:.0f} s, "
         "this process and its workers); load average at end "
