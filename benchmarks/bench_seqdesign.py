@@ -18,8 +18,8 @@ mean, its distance from the reference mean in reference SDs, and the 95 % interv
 width relative to the reference (the largest one-shot design, calibrated in the
 same run of this script). The quick steps of the
 sequential design give a mean and SD only: their width is 3.92 SD (marked ``~``).
-The figure (``--figure``, default ``seqdesign.png``) shows mean ± 2 SD against the
-number of runs for both, with the truth.
+The figure (``--figure``; default ``bayescal-seqdesign.png`` in the temporary
+folder) shows mean ± 2 SD against the number of runs for both, with the truth.
 
 BLAS and OpenMP are single-threaded (set before numpy is imported).
 
@@ -248,7 +248,9 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("examples", nargs="*", help=f"of {', '.join(CASES)} (default: both)")
     parser.add_argument("--quick", action="store_true", help="the wall only, 8, 15, 30 runs")
-    parser.add_argument("--figure", type=Path, default=Path("seqdesign.png"))
+    parser.add_argument(
+        "--figure", type=Path, default=Path(tempfile.gettempdir()) / "bayescal-seqdesign.png"
+    )
     parser.add_argument("--keep", type=Path, help="folder for the study folders (kept)")
     opts = parser.parse_args()
     names = list(opts.examples) or (list(QUICK_SIZES) if opts.quick else list(CASES))
