@@ -16,6 +16,9 @@ Runs, each in its own process so thread settings and imports stay clean:
   unscreened and screened, on the Twin House calibration, bulk ESS per evaluation
   and per second (shorter Gibbs chains than the script's default; skipped with a
   message where the shared Annex 58 data are missing);
+* ``bench_seqdesign.py --quick``: runs to posterior on the wall, one-shot designs of 8,
+  15 and 30 runs against a sequential one (about a minute; the full set, with the
+  co-heating box, is ``bench_seqdesign.py`` alone);
 * ``bench_examples.py``: every worked example end to end, the examples table (the
   EnergyPlus ``office`` example is listed as not run, with the reason: about 9
   minutes of screening, runs and calibration; ``bench_examples.py --office`` runs it).
@@ -47,6 +50,7 @@ QUICK = [
     ["bench_vectorised.py", "--quick"],
     ["bench_hmc.py", "--quick"],
     ["bench_moves.py", "--gibbs", "1000", "2000"],
+    ["bench_seqdesign.py", "--quick"],
     ["bench_examples.py"],
 ]
 #: Lines repeated in the summary: (script, text the line contains).

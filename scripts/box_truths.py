@@ -23,7 +23,11 @@ discrepancy (``[outputs.errors.<output>] discrepancy``) to see what it does to t
 intervals; the table is then ``box_truths_<mode>_<kind>.csv``. ``--layers`` runs the
 built-in box with ``window_model = "layers"`` and the Perez sky (the pair nearest
 EnergyPlus, tests/simulators/test_energyplus_box.py) instead of the paper's window;
-its table ends in ``_layers``.
+its table ends in ``_layers``. ``--sequential`` grows each truth's design in batches
+(``[design] sequential = true``, docs/method.md "Sequential design") from a first
+hypercube of ``--first`` runs, ``--batch`` runs a batch, up to ``--max-runs`` (by default
+10, 5 and 20: at most half the examples' 40 runs); the table gets the runs each truth
+used and why its design stopped, and ends in ``_sequential``.
 
 Run (each truth is about one minute on the idle 2-core machine)::
 
@@ -112,6 +116,28 @@ def set_simulator(study: Path, settings: dict[str, str]) -> None:
     _edit_once(study, r"^\[simulator\]\n", "[simulator]\n" + lines, "[simulator] table")
 
 
+def set_sequential(study: Path, first: int, batch: int, max_runs: int) -> None:
+    """Make the ``[design]`` of ``study`` sequential: a first hypercube of ``first``
+    runs, batches of ``batch`` runs, at most ``max_runs`` runs in all."""
+    _edit_once(
+        study,
+        r"^(\[design\]\n(?:#.*\n)*)runs = \d+$",
+        rf"\g<1>runs = {first}\nsequential = true\nbatch = {batch}\nmax_runs = {max_runs}",
+        "[design] runs line",
+    )
+
+
+#: The end of the line a sequential design's stop is said in, by the reason's start.
+STOPS = {"the emulator's error": "tolerance", "max_runs": "max_runs", "the shift": "stalled"}
+
+
+def stop_reason(line: str) -> str:
+    """``tolerance``, ``max_runs``, ``stalled`` or ``max_minutes`` from the design's
+    ``design: sequential design stopped at N runs (...)`` line."""
+    why = line.split("(", 1)[1]
+    return next((v for k, v in STOPS.items() if why.startswith(k)), "max_minutes")
+
+
 def one_truth(
     mode: str,
     index: int,
@@ -119,9 +145,11 @@ def one_truth(
     folder: Path,
     discrepancy: str | None = None,
     simulator: dict[str, str] | None = None,
+    sequential: tuple[int, int, int] | None = None,
 ) -> dict[str, object]:
     """Make the data at ``values``, run the example's study (its in-likelihood
-    discrepancy replaced by ``discrepancy``, one of :data:`DISCREPANCY`, if given),
+    discrepancy replaced by ``discrepancy``, one of :data:`DISCREPANCY`, if given;
+    its design sequential with ``sequential = (first, batch, max_runs)`` if given),
     score its intervals and bands."""
     name = f"box-{mode}"
     shutil.rmtree(folder, ignore_errors=True)
@@ -130,17 +158,25 @@ def one_truth(
         set_discrepancy(folder / "study.toml", discrepancy)
     if simulator:
         set_simulator(folder / "study.toml", simulator)
+    if sequential:
+        set_sequential(folder / "study.toml", *sequential)
     table = box.make_phase(mode, np.random.default_rng(SEED + index), values)
     table.to_parquet(folder / "data" / f"{name}.parquet", index=False, compression="zstd")
     start = time.perf_counter()
-    res = run(load_study(folder), until="predict", options=Options())
+    said: list[str] = []
+    res = run(load_study(folder), until="predict", options=Options(), say=said.append)
     seconds = time.perf_counter() - start
     post = res.posterior
-    if post is None or res.predictions is None:
+    if post is None or res.predictions is None or res.design is None:
         raise RuntimeError(f"truth {index}: the run stopped before its predictions")
     lower, upper = post.interval(0.95)
     mean = post.draws.reshape(-1, len(post.names)).mean(axis=0)
     row: dict[str, object] = {"truth": index, "seconds": round(seconds, 1)}
+    row["runs"] = res.design.runs
+    if sequential:
+        stops = [line for line in said if "sequential design stopped at" in line]
+        row["stop"] = stop_reason(stops[-1]) if stops else "unknown"
+        row["steps"] = sum(bool(re.match(r"design: \d+ runs \(", line)) for line in said)
     for j, p in enumerate(post.names):
         row[f"{p}_true"] = values[p]
         row[f"{p}_mean"] = float(mean[j])
@@ -196,11 +232,20 @@ def main() -> None:
         action="store_true",
         help='the built-in box with window_model = "layers" and the Perez sky',
     )
+    parser.add_argument(
+        "--sequential", action="store_true", help="[design] sequential = true (table: _sequential)"
+    )
+    parser.add_argument("--first", type=int, default=10, help="--sequential: first design runs")
+    parser.add_argument("--batch", type=int, default=5, help="--sequential: runs per batch")
+    parser.add_argument("--max-runs", type=int, default=20, help="--sequential: most runs in all")
     args = parser.parse_args()
     args.out.mkdir(parents=True, exist_ok=True)
-    suffix = (f"_{args.discrepancy}" if args.discrepancy else "") + (
-        "_layers" if args.layers else ""
+    suffix = (
+        (f"_{args.discrepancy}" if args.discrepancy else "")
+        + ("_layers" if args.layers else "")
+        + ("_sequential" if args.sequential else "")
     )
+    sequential = (args.first, args.batch, args.max_runs) if args.sequential else None
     csv = args.out / f"box_truths_{args.mode}{suffix}.csv"
     drawn = truths(args.truths)
     rows = [] if args.fresh else finished(csv, drawn)
@@ -212,7 +257,13 @@ def main() -> None:
         folder = args.out / f"{args.mode}{suffix}-{i}"
         rows.append(
             one_truth(
-                args.mode, i, values, folder, args.discrepancy, LAYERS if args.layers else None
+                args.mode,
+                i,
+                values,
+                folder,
+                args.discrepancy,
+                LAYERS if args.layers else None,
+                sequential,
             )
         )
         print(f"truth {i}: " + ", ".join(f"{k}={v}" for k, v in rows[-1].items()), flush=True)
@@ -240,6 +291,16 @@ def main() -> None:
             f"50 % {b50.min():.3f}-{b50.max():.3f} (median {b50.median():.3f})"
         )
     print(f"R-hat <= {table['rhat_max'].max():.4f}, bulk ESS >= {table['ess_bulk_min'].min():.0f}")
+    if "runs" in table:
+        runs = table["runs"]
+        print(
+            f"runs: {runs.min()}-{runs.max()} (mean {runs.mean():.1f}); seconds per truth: "
+            f"{table['seconds'].min():.0f}-{table['seconds'].max():.0f} "
+            f"(median {table['seconds'].median():.0f}, total {table['seconds'].sum():.0f})"
+        )
+    if "stop" in table:
+        counts = table["stop"].value_counts()
+        print("design stopped by: " + ", ".join(f"{k} {v}" for k, v in counts.items()))
 
 
 if __name__ == "__main__":
