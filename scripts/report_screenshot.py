@@ -24,6 +24,8 @@ import sys  # noqa: E402
 import tempfile  # noqa: E402
 from pathlib import Path  # noqa: E402
 
+from PIL import Image  # noqa: E402
+
 from bayescal.config import load_study  # noqa: E402
 from bayescal.examples import copy_example  # noqa: E402
 from bayescal.pipeline import Options, run  # noqa: E402
@@ -63,7 +65,9 @@ def main() -> int:
             print("error: chromium wrote no screenshot", file=sys.stderr)
             return 1
         opts.png.parent.mkdir(parents=True, exist_ok=True)
-        shutil.copyfile(shot, opts.png)
+        # 256 colours keep the page's text sharp and the file small (docs images < 150 kB)
+        with Image.open(shot) as image:
+            image.convert("RGB").quantize(colors=256).save(opts.png, optimize=True)
     print(f"wrote {opts.png}")
     return 0
 
