@@ -39,6 +39,7 @@ from bayescal.errors import BayescalError, ConfigError, DataError
 from bayescal.pipeline.budget import check_budget, estimate_time
 from bayescal.pipeline.keys import keys_and_inputs
 from bayescal.pipeline.route import check_route
+from bayescal.pipeline.seqdesign import sequential_design
 from bayescal.pipeline.stages import (
     Context,
     EmulatorResult,
@@ -286,8 +287,6 @@ def _design(r: _Runner) -> Design:
         return found
     start = time.perf_counter()
     if r.ctx.study.design.sequential:
-        from bayescal.pipeline.seqdesign import sequential_design
-
         design, _ = sequential_design(r.ctx, r.keys["design"], r.say)
     else:
         design = make_design(r.ctx)

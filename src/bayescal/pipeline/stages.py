@@ -341,7 +341,7 @@ def calibrate_stage(
     """Sample theta*, lambda and lambda* (``[calibration]``); with ``[study] prior_from``
     the chains start from the previous posterior's draws
     (:func:`bayescal.pipeline.sequential.warm_starts`)."""
-    from bayescal.pipeline.sequential import warm_starts
+    from bayescal.pipeline import sequential  # looked up at call time (tests replace it)
 
     section = ctx.study.calibration
     total = section.chains * (section.burn + section.samples)
@@ -373,7 +373,7 @@ def calibrate_stage(
             moves=section.moves,
             max_draws=section.most_samples,
             on_extend=extend,
-            starts=warm_starts(ctx.study, section.chains),
+            starts=sequential.warm_starts(ctx.study, section.chains),
         )
     finally:
         close()

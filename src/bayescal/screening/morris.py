@@ -53,7 +53,8 @@ __all__ = [
 ]
 
 
-def _problem(names: Sequence[str]) -> dict[str, object]:
+def salib_problem(names: Sequence[str]) -> dict[str, object]:
+    """SALib's problem of ``names`` on the unit cube (Morris and Sobol sample it)."""
     return {"num_vars": len(names), "names": list(names), "bounds": [[0.0, 1.0]] * len(names)}
 
 
@@ -123,7 +124,7 @@ def morris_design(names: Sequence[str], trajectories: int, levels: int, seed: in
             f"trajectories={trajectories}, levels={levels}"
         )
     unit = morris_sample.sample(
-        _problem(names), int(trajectories), num_levels=int(levels), seed=int(seed)
+        salib_problem(names), int(trajectories), num_levels=int(levels), seed=int(seed)
     )
     unit = np.clip(np.asarray(unit, dtype=float), 0.0, 1.0)
     unit.flags.writeable = False
@@ -217,7 +218,7 @@ def morris_indices(
             hint="see the failed runs in the output folder's simulations/failures",
         )
     found = morris_analyze.analyze(
-        _problem(design.names),
+        salib_problem(design.names),
         np.asarray(design.unit)[keep],
         y[keep],
         num_resamples=int(bootstrap),

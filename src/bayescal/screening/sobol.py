@@ -38,16 +38,13 @@ import numpy as np
 
 from bayescal.errors import ConfigError
 from bayescal.optional import require
+from bayescal.screening.morris import salib_problem
 from bayescal.screening.surrogate import ScalarGP, fit_scalar_gp
 
 __all__ = ["Q2_WARN", "SobolIndices", "sobol_indices"]
 
 #: Below this leave-one-out Q2 the GP is too rough for the ranking to be trusted.
 Q2_WARN = 0.8
-
-
-def _problem(names: Sequence[str]) -> dict[str, object]:
-    return {"num_vars": len(names), "names": list(names), "bounds": [[0.0, 1.0]] * len(names)}
 
 
 @dataclass(frozen=True, eq=False)
@@ -161,7 +158,7 @@ def _analyse(names: Sequence[str], y: np.ndarray, resamples: int, seed: int) -> 
     with warnings.catch_warnings():  # a flat path: SALib warns and returns zeros
         warnings.simplefilter("ignore")
         found: dict[str, object] = sobol_analyze.analyze(
-            _problem(names),
+            salib_problem(names),
             y,
             calc_second_order=False,
             num_resamples=int(resamples),
@@ -240,7 +237,7 @@ def sobol_indices(
                             int(y.size), math.nan, 0.0, 0.0, flat, int(base))  # fmt: skip
     gp: ScalarGP = fit_scalar_gp(x, y, restarts=restarts, seed=seed)
     points = sobol_sample.sample(
-        _problem(names), int(base), calc_second_order=False, scramble=True, seed=int(seed)
+        salib_problem(names), int(base), calc_second_order=False, scramble=True, seed=int(seed)
     )
     mean, _ = gp.predict(points)
     found = _analyse(names, mean, bootstrap, seed + 1)
