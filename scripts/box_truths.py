@@ -146,6 +146,7 @@ def one_truth(
     discrepancy: str | None = None,
     simulator: dict[str, str] | None = None,
     sequential: tuple[int, int, int] | None = None,
+    noise: str | None = None,
 ) -> dict[str, object]:
     """Make the data at ``values``, run the example's study (its in-likelihood
     discrepancy replaced by ``discrepancy``, one of :data:`DISCREPANCY`, if given;
@@ -160,6 +161,9 @@ def one_truth(
         set_simulator(folder / "study.toml", simulator)
     if sequential:
         set_sequential(folder / "study.toml", *sequential)
+    if noise is not None:
+        _edit_once(folder / "study.toml", r"^\[predict\]\n", f'[predict]\nnoise = "{noise}"\n',
+                   "[predict] table")  # fmt: skip
     table = box.make_phase(mode, np.random.default_rng(SEED + index), values)
     table.to_parquet(folder / "data" / f"{name}.parquet", index=False, compression="zstd")
     start = time.perf_counter()
@@ -238,12 +242,19 @@ def main() -> None:
     parser.add_argument("--first", type=int, default=10, help="--sequential: first design runs")
     parser.add_argument("--batch", type=int, default=5, help="--sequential: runs per batch")
     parser.add_argument("--max-runs", type=int, default=20, help="--sequential: most runs in all")
+    parser.add_argument(
+        "--noise",
+        choices=("simulator", "basis", "calibration"),
+        default=None,
+        help="[predict] noise of the studies (table: _noise-<value>; default: the example's)",
+    )
     args = parser.parse_args()
     args.out.mkdir(parents=True, exist_ok=True)
     suffix = (
         (f"_{args.discrepancy}" if args.discrepancy else "")
         + ("_layers" if args.layers else "")
         + ("_sequential" if args.sequential else "")
+        + (f"_noise-{args.noise}" if args.noise else "")
     )
     sequential = (args.first, args.batch, args.max_runs) if args.sequential else None
     csv = args.out / f"box_truths_{args.mode}{suffix}.csv"
@@ -264,6 +275,7 @@ def main() -> None:
                 args.discrepancy,
                 LAYERS if args.layers else None,
                 sequential,
+                args.noise,
             )
         )
         print(f"truth {i}: " + ", ".join(f"{k}={v}" for k, v in rows[-1].items()), flush=True)

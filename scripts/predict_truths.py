@@ -22,6 +22,9 @@ the paper's priors; the boards keep the study's 840 J/(kg·K)) the script
 ``--discrepancy`` adds ``discrepancy = true`` to ``[outputs.errors.heat_flux_in]``
 (the in-likelihood discrepancy, kriged at the new record's conditions). The model
 is the truth's own, so any width the discrepancy adds is not needed here.
+``--noise basis`` sets ``[predict] noise = "basis"``: the discrepancy output's
+noise from what its basis leaves of the re-run simulator's residuals (the default
+keeps the calibration's lambda*, which also holds the emulator's error).
 
 It prints one line per truth, the mean and pooled coverage over the truths, and
 writes ``predict_truths_<variant>.csv`` and ``.json`` into ``--out``.
@@ -31,6 +34,8 @@ Run (each truth takes 5-15 s on the 2-core machine)::
     PYTHONPATH=src .venv/bin/python scripts/predict_truths.py --truths 10 --out /tmp/pt
     PYTHONPATH=src .venv/bin/python scripts/predict_truths.py --truths 10 --discrepancy \\
         --out /tmp/pt
+    PYTHONPATH=src .venv/bin/python scripts/predict_truths.py --truths 10 --discrepancy \\
+        --noise basis --out /tmp/pt
 """
 
 from __future__ import annotations
@@ -66,8 +71,10 @@ STUDY_SEED, NEW_SEED = 1000, 2000
 CALIBRATED = ("k_cb", "cp_cb")
 
 
-def study_text(name: str, seed: int, discrepancy: bool, test_days: int = 2) -> str:
-    """compare_study.STUDY at the size of this check."""
+def study_text(
+    name: str, seed: int, discrepancy: bool, test_days: int = 2, noise: str = "simulator"
+) -> str:
+    """compare_study.STUDY at the size of this check (``noise``: ``[predict] noise``)."""
     text = STUDY.format(name=name, model="white")
     edits = {
         "seed = 11\n": f"seed = {seed}\n",
@@ -84,7 +91,7 @@ def study_text(name: str, seed: int, discrepancy: bool, test_days: int = 2) -> s
         if text.count(old) != 1:
             raise RuntimeError(f"compare_study.STUDY changed: {old!r} not found once")
         text = text.replace(old, new)
-    return text
+    return text + f'\n[predict]\nnoise = "{noise}"\n'
 
 
 def one_truth(
@@ -95,6 +102,7 @@ def one_truth(
     discrepancy: bool,
     days: int,
     new_days: int,
+    noise: str = "simulator",
 ) -> dict[str, object]:
     """Calibrate at ``truth``, predict another record, score it."""
     shutil.rmtree(folder, ignore_errors=True)
@@ -102,7 +110,7 @@ def one_truth(
     data = wall_data(seed=STUDY_SEED + index, days=days, phi=0.0, truth=truth, test_days=2)
     data.to_csv(folder / "wall.csv", index=False)
     (folder / "study.toml").write_text(
-        study_text(folder.name, 11 + index, discrepancy), encoding="utf-8"
+        study_text(folder.name, 11 + index, discrepancy, noise=noise), encoding="utf-8"
     )
     study = load_study(folder)
     options = Options(backend="serial")
@@ -168,10 +176,18 @@ def main(argv: list[str] | None = None) -> dict[str, object]:
     parser.add_argument("--days", type=int, default=12, help="training days of the study (12)")
     parser.add_argument("--new-days", type=int, default=8, help="days predicted (8)")
     parser.add_argument("--discrepancy", action="store_true", help="in-likelihood discrepancy")
+    parser.add_argument(
+        "--noise",
+        choices=("simulator", "basis", "calibration"),
+        default="simulator",
+        help="[predict] noise of the studies (default: simulator, the study-file default)",
+    )
     parser.add_argument("--out", type=Path, default=None, help="folder for the CSV and JSON")
     parser.add_argument("--keep", action="store_true", help="keep the study folders in --out")
     args = parser.parse_args(argv)
     variant = "discrepancy" if args.discrepancy else "white"
+    if args.noise != "simulator":
+        variant += f"-noise-{args.noise}"
     rng = np.random.default_rng(SEED)
     truths = [
         {k: v for k, v in random_truth(rng).items() if k in CALIBRATED} for _ in range(args.truths)
@@ -188,6 +204,7 @@ def main(argv: list[str] | None = None) -> dict[str, object]:
                 discrepancy=args.discrepancy,
                 days=args.days,
                 new_days=args.new_days,
+                noise=args.noise,
             )
             rows.append(row)
             print(

@@ -218,3 +218,80 @@ def test_krige_observed_checks_its_shapes() -> None:
         krige_observed(np.zeros((3, 2)), np.zeros((2, 2, 2)), np.eye(2))
     with pytest.raises(ValueError, match="noise block"):
         krige_observed(np.zeros((3, 2)), np.zeros((2, 5, 5)), np.eye(3))
+
+
+@pytest.mark.parametrize(
+    ("error", "phi", "kind"),
+    [("white", 0.0, True), ("ar1", 0.6, True), ("white", 0.0, "both")],
+)
+def test_noise_given_the_simulator_is_the_dense_conditional_of_lambda_star(
+    small_wall: tuple[Any, Any, Emulator], error: str, phi: float, kind: Any
+) -> None:
+    """E[1/lambda*] given the run at a draw, phi and r: the generalised eigenproblem of
+    the observed weights plus what the basis leaves, against the density of every
+    measured sample (AR(1) or white in sample space) under K delta + e, integrated over
+    log lambda* on a dense grid."""
+    from scipy import stats
+
+    _, _, em = small_wall
+    rng, obs = _problem(em, 8, error, kind)
+    k, (n, p), m = obs.k, obs.k.shape, em.x.shape[0]
+    y_sim = rng.normal(size=(n, m))
+    r, r0 = 0.05, 0.03
+    values = {"lambda_star": 1.0, "phi": phi, "delta_rel": r, "delta_ind": r0}
+    field = OutputDiscrepancy.build(em, obs, 0, np.zeros((0, em.x.shape[1])))
+    resid = obs.y_star - y_sim
+    outside = obs.precision_out_of_basis(0, resid, phi)
+    got = field.noise_given(values, obs.weights_of(0, y_sim, phi), outside)
+
+    over_x, independent = kind in (True, "both"), kind in ("independent", "both")
+    c_delta = np.zeros((p * m, p * m))
+    for j, kern in enumerate(em.kernels):
+        c_delta[j * m : (j + 1) * m, j * m : (j + 1) * m] = kern.variance * (
+            over_x * r * kern.x_corr(em.x) + independent * r0 * np.eye(m)
+        )
+    to_y = np.zeros((n * m, p * m))
+    for j in range(p):
+        to_y[:, j * m : (j + 1) * m] = np.kron(np.eye(m), k[:, j][:, None])
+    signal = to_y @ c_delta @ to_y.T
+    corr = np.kron(np.eye(m), _ar1_corr(n, phi))
+    flat = resid.T.reshape(-1)
+    a, b = obs.outputs[0].prior
+
+    def log_post(ell: float) -> float:
+        lam = np.exp(ell)
+        dense = stats.multivariate_normal(np.zeros(flat.size), signal + corr / lam)
+        return float(a * ell - b * lam + dense.logpdf(flat))
+
+    centre = np.log(1.0 / got)  # near the mode of log(1/lambda*)
+    grid = -centre + np.linspace(-1.0, 1.0, 81)
+    logs = np.array([log_post(g) for g in grid])
+    top = int(np.argmax(logs))
+    assert 10 < top < 70  # the grid holds the mode
+    w = np.exp(logs - logs.max())
+    assert w[0] < 1e-12  # and the tails
+    assert w[-1] < 1e-12
+    ref = float(np.trapezoid(w, grid) / np.trapezoid(w * np.exp(-grid), grid))
+    assert got == pytest.approx(ref, rel=1e-6)
+    # the in-basis part matters here: the noise it implies is not the outside one alone
+    assert abs(got / ((outside[0] - 1.0) / outside[1]) - 1.0) > 1e-3
+
+
+@pytest.mark.parametrize("kind", [True, "orthogonal"])
+def test_noise_given_a_negligible_discrepancy_is_the_white_update_of_the_whole_residual(
+    small_wall: tuple[Any, Any, Emulator], kind: Any
+) -> None:
+    """At r -> 0 the residuals' weights are noise as well: the conditional is the Gamma
+    update by every sample's residual (the orthogonal discrepancy's constrained prior
+    included)."""
+    _, _, em = small_wall
+    rng, obs = _problem(em, 9, "white", kind)
+    y_sim = rng.normal(size=obs.y_star.shape)
+    values = {"lambda": 50.0, "lambda_star": 1.0, "delta_rel": 1e-14}
+    field = OutputDiscrepancy.build(em, obs, 0, np.zeros((0, em.x.shape[1])))
+    resid = obs.y_star - y_sim
+    outside = obs.precision_out_of_basis(0, resid)
+    theta = np.full(em.theta.shape[1], 0.5)
+    got = field.noise_given(values, obs.weights_of(0, y_sim), outside, theta)
+    shape, rate = obs.precision_given(0, resid)
+    assert got == pytest.approx((shape - 1.0) / rate, rel=1e-6)

@@ -26,8 +26,8 @@ from bayescal.pipeline.predict import (
     conditioned_discrepancy,
     predict_band,
     simulator_band,
-    simulator_noise,
 )
+from bayescal.pipeline.simnoise import simulator_noise
 from bayescal.simulators.base import Simulator
 from bayescal.simulators.wall import MultilayerWall
 from bayescal.simulators.wrappers import IntervalMeans
@@ -82,10 +82,14 @@ def band_coverage(
     50 % bands built from simulator ``runs`` at the posterior draws ``pick``: the
     band ``bayescal run`` prints with ``[predict] method = "simulator"`` (the noise
     estimated again from the runs' training residuals; with an in-likelihood
-    discrepancy, conditioned on the training residuals, which needs the
-    ``emulator``)."""
-    lam = simulator_noise(a, runs, post, pick)
-    error = {} if emulator is None else conditioned_discrepancy(emulator, a, post, pick, runs)
+    discrepancy, its conditional given the runs, and the discrepancy conditioned on
+    the training residuals with it, which needs the ``emulator``)."""
+    lam = simulator_noise(a, runs, post, pick, emulator=emulator)
+    error = (
+        {}
+        if emulator is None
+        else conditioned_discrepancy(emulator, a, post, pick, runs, lam_stars=lam)
+    )
     band = simulator_band(a, runs, lam, measured=measured, model_error=error)
     out: dict[str, dict[str, tuple[float, float]]] = {}
     for name, y_all in measured.items():

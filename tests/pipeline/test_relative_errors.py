@@ -28,7 +28,8 @@ from bayescal.errors import ConfigError, DataError
 from bayescal.examples import copy_example
 from bayescal.periods import layout_periods
 from bayescal.pipeline.compare import relative_jacobian
-from bayescal.pipeline.predict import simulator_band, simulator_noise
+from bayescal.pipeline.predict import simulator_band
+from bayescal.pipeline.simnoise import simulator_noise
 from box_study import reduced_box
 from virtual_wall import PRIORS, simulate, virtual_experiment
 

@@ -4,7 +4,7 @@ With ``[predict] method = "simulator"`` the model part of a band is the
 simulator itself, which does not make the emulator's error that the
 calibration's lambda* also holds; the band's noise is estimated again at every
 draw from the run's training residuals
-(:func:`bayescal.pipeline.predict.simulator_noise`). Checked here: the Gamma
+(:func:`bayescal.pipeline.simnoise.simulator_noise`). Checked here: the Gamma
 update (the prior plus the mean square), the estimate against the injected
 noise on a known truth, and the bands' coverage on a known truth at their
 stated rates (binomial bounds), where the calibration's inflated lambda* makes
@@ -20,7 +20,9 @@ from scipy import stats
 from bayescal.calibration.posterior import Posterior
 from bayescal.emulator.assemble import Assembled, NoiseSpec, assemble
 from bayescal.emulator.noise import ErrorModel
-from bayescal.pipeline.predict import predictions_dataset, simulator_band, simulator_noise
+from bayescal.emulator.training import train
+from bayescal.pipeline.predict import predictions_dataset, simulator_band
+from bayescal.pipeline.simnoise import simulator_noise
 from virtual_wall import NOISE_VARIANCE, PRIORS, simulate, virtual_experiment
 
 DRAWS = 12
@@ -95,25 +97,72 @@ def test_the_estimate_is_the_injected_noise(
     assert np.all(calibration > 2.0 * sd)  # the inflated lambda* was replaced
 
 
-def test_an_output_with_a_discrepancy_keeps_the_calibrations_noise() -> None:
-    ve = virtual_experiment(seed=11, runs=8, periods=8, warmup_days=2, test_days=4)
+def _discrepancy_experiment(
+    model: ErrorModel, phi: float
+) -> tuple[Assembled, np.ndarray, np.ndarray, dict]:
+    ve = virtual_experiment(seed=11, runs=8, periods=8, warmup_days=2, test_days=4, noise_phi=phi)
     a = assemble(
         ve.design, ve.runs, ve.measured, ve.boundary, ve.layout, components=2, scale="output",
-        noise={"heat_flux_in": NoiseSpec("white", None, discrepancy=True)},
+        noise={"heat_flux_in": NoiseSpec(model, None, discrepancy=True)},
     )  # fmt: skip
+    return a, ve.measured["heat_flux_in"], simulate(ve.boundary, ve.truth), ve.truth
+
+
+@pytest.mark.parametrize(("model", "phi"), [("white", 0.0), ("ar1", 0.7)])
+def test_the_out_of_basis_update_against_a_dense_projection(model: ErrorModel, phi: float) -> None:
+    a, *_ = _discrepancy_experiment(model, 0.0)
     obs = a.observations
-    names = ["lambda", *obs.names()]
-    aux = np.ones((1, DRAWS, len(names)))
-    aux[..., 1] = np.linspace(1.0, 2.0, DRAWS)
-    unit = np.full((1, DRAWS, len(PRIORS)), 0.5)
-    acceptance = np.full((1, len(PRIORS) + len(names)), 0.3)
-    post = Posterior.build(
-        list(PRIORS), PRIORS, unit, acceptance=acceptance, aux=aux, aux_names=names,
-        noise=obs.outputs,
-    )  # fmt: skip
-    runs = {"heat_flux_in": np.tile(simulate(ve.boundary, ve.truth), (DRAWS, 1))}
-    lam = simulator_noise(a, runs, post, np.arange(DRAWS))
-    np.testing.assert_array_equal(lam[:, 0], aux[0, :, 1])
+    resid = np.random.default_rng(6).normal(size=obs.y_star.shape)
+    resid[5, 1] = np.nan  # this period is left out
+    shape, rate = obs.precision_out_of_basis(0, resid, phi)
+    kept = np.delete(resid, 1, axis=1)
+    n, p = obs.block(0)[0].shape
+    # the whitening map as a matrix: W^T W = R^-1 of unit-diagonal AR(1)
+    w = np.eye(n)
+    if model == "ar1":
+        w[1:] = (np.eye(n)[1:] - phi * np.eye(n)[:-1]) / np.sqrt(1.0 - phi * phi)
+        lags = np.abs(np.subtract.outer(np.arange(n), np.arange(n)))
+        np.testing.assert_allclose(w.T @ w, np.linalg.inv(phi**lags), atol=1e-10)
+    kz = w @ obs.block(0)[0]
+    leave = np.eye(n) - kz @ np.linalg.solve(kz.T @ kz, kz.T)
+    quad = float(np.sum((leave @ w @ kept) ** 2))
+    prior = obs.outputs[0].prior
+    assert shape == pytest.approx(prior[0] + 0.5 * kept.shape[1] * (n - p), rel=1e-12)
+    assert rate == pytest.approx(prior[1] + 0.5 * quad, rel=1e-10)
+
+
+@pytest.mark.parametrize(("model", "noise_phi"), [("white", 0.0), ("ar1", 0.6)])
+def test_with_noise_basis_an_output_with_a_discrepancy_gets_the_noise_its_basis_leaves(
+    model: ErrorModel, noise_phi: float
+) -> None:
+    """The discrepancy lies on the basis: adding any in-basis term to the residuals leaves
+    the estimate unchanged, and on the truth's run it is the injected noise."""
+    a, _, truth_run, truth = _discrepancy_experiment(model, noise_phi)
+    post = _posterior_at_truth(a, truth, noise_phi)
+    runs = {"heat_flux_in": np.tile(truth_run, (DRAWS, 1))}
+    # by default (noise = "simulator") such an output keeps the calibration's lambda*
+    np.testing.assert_array_equal(
+        simulator_noise(a, runs, post, np.arange(DRAWS))[:, 0], post.lam_stars.reshape(-1)
+    )
+    lam = simulator_noise(a, runs, post, np.arange(DRAWS), noise="basis")
+    sd = a.observations.outputs[0].scale / np.sqrt(lam[:, 0])
+    obs = a.observations
+    n, p = obs.block(0)[0].shape
+    dof = obs.y_star.shape[1] * (n - p)
+    tolerance = 4.0 * np.sqrt((1 + noise_phi**2) / (1 - noise_phi**2) / (2.0 * dof))
+    assert np.all(np.abs(sd / np.sqrt(NOISE_VARIANCE) - 1.0) < tolerance)
+    calibration = obs.outputs[0].scale / np.sqrt(post.lam_stars.reshape(-1))
+    assert np.all(calibration > 2.0 * sd)  # the inflated lambda* was replaced
+    # a large discrepancy on the basis weights, period by period: the estimate is unchanged
+    st = a.outputs.standardisations[0]
+    shift = obs.block(0)[0] @ np.random.default_rng(2).normal(0.0, 5.0, (p, obs.y_star.shape[1]))
+    moved = a.layout.cut(truth_run) - (st.sd[:, None] * shift)
+    flat = np.asarray(truth_run, dtype=float).copy()
+    for j, start in enumerate(a.layout.train_starts):
+        flat[start : start + n] = moved[:, j]
+    moved_runs = {"heat_flux_in": np.tile(flat, (DRAWS, 1))}
+    lam_moved = simulator_noise(a, moved_runs, post, np.arange(DRAWS), noise="basis")
+    np.testing.assert_allclose(lam_moved, lam, rtol=1e-9)
 
 
 def _coverage(a: Assembled, measured: np.ndarray, runs: np.ndarray, lam: np.ndarray) -> dict:
@@ -157,3 +206,30 @@ def test_the_bands_noise_is_stated_in_the_outputs_unit() -> None:
         times, a.layout, {"heat_flux_in": measured}, {"heat_flux_in": truth_run}, band, {}
     )
     assert ds.attrs["heat_flux_in_calibrated_noise_sd"] == pytest.approx(want, rel=1e-12)
+
+
+def test_with_the_emulator_a_discrepancy_output_gets_its_conditional_noise() -> None:
+    """noise = "simulator" with the emulator: the noise given the run, the draw's phi and
+    r (:meth:`OutputDiscrepancy.noise_given`). At a negligible r the residuals' weights
+    are noise too, so it is the white update of the whole residual (precision_given);
+    and the truth's run leaves the injected noise."""
+    a, _, truth_run, truth = _discrepancy_experiment("white", 0.0)
+    post = _posterior_at_truth(a, truth, 0.0)
+    names = list(post.aux_names)
+    aux = np.array(post.aux, dtype=float)
+    aux[..., names.index("delta_rel")] = 1e-12
+    post = Posterior.build(
+        list(PRIORS), PRIORS, post.unit_draws, acceptance=post.acceptance, aux=aux,
+        aux_names=names, noise=a.observations.outputs,
+    )  # fmt: skip
+    emulator = train(a, n_burn=60, n_draws=10, n_chains=1, seed=0)
+    runs = {"heat_flux_in": np.tile(truth_run, (DRAWS, 1))}
+    lam = simulator_noise(a, runs, post, np.arange(DRAWS), emulator=emulator)
+    obs = a.observations
+    st = a.outputs.standardisations[0]
+    resid = obs.block(0)[1] - (a.layout.cut(truth_run) - st.mean[:, None]) / st.sd[:, None]
+    shape, rate = obs.precision_given(0, resid)
+    np.testing.assert_allclose(lam[:, 0], (shape - 1.0) / rate, rtol=1e-6)
+    sd = obs.outputs[0].scale / np.sqrt(lam[:, 0])
+    tolerance = 4.0 / np.sqrt(2.0 * obs.y_star.size)
+    assert np.all(np.abs(sd / np.sqrt(NOISE_VARIANCE) - 1.0) < tolerance)

@@ -41,6 +41,7 @@ tau^-1``), on one like a training period it carries that period's residual over.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 
@@ -234,6 +235,19 @@ class OutputDiscrepancy:
         lam = float(values[obs.coordinate("lambda_star", q)])
         phi = float(values[obs.coordinate("phi", q)]) if q in obs.ar_outputs else 0.0
         measured = obs.weights_of(q, obs.block(q)[1], phi)
+        prior = self.prior(values, eta_cov, theta)
+        return krige_observed(measured - model, prior, obs.noise_block(q, lam, phi))
+
+    def prior(
+        self,
+        values: Mapping[str, float],
+        eta_cov: FloatArray | None = None,
+        theta: FloatArray | None = None,
+    ) -> FloatArray:
+        """The covariance of the (model +) discrepancy weights before the measurements,
+        ``(p_o, M, M)``, or ``(p_o, M, p_o, M)`` for an orthogonal discrepancy
+        (arguments as :meth:`condition`)."""
+        obs, q = self.observations, self.q
         parts = obs.outputs[q].delta_parts
         prior = np.zeros_like(self.x_corr)
         if "delta_rel" in parts:
@@ -254,4 +268,75 @@ class OutputDiscrepancy:
             p = own.shape[0]
             full[np.arange(p), :, np.arange(p), :] += own
             prior = full
-        return krige_observed(measured - model, prior, obs.noise_block(q, lam, phi))
+        return prior
+
+    def noise_given(
+        self,
+        values: Mapping[str, float],
+        model: FloatArray,
+        outside: tuple[float, float],
+        theta: FloatArray | None = None,
+    ) -> float:
+        """The noise precision ``1 / E[1 / lambda*]`` given the simulator at one draw.
+
+        With the model known (the simulator re-run at the draw's theta*, its
+        weights ``model`` ``(m*, p_o)``) and the draw's ``phi`` and ``r``, the
+        training residuals' weights ``e = w_hat* - model`` are
+        ``N(0, A + B / lambda*)`` (``A`` the discrepancy's covariance over the
+        training periods, ``B = (Z^T Z)^-1 (x) I`` the noise block at unit
+        precision), and what the basis leaves of the residuals adds the Gamma
+        ``outside`` ``(shape, rate)`` (the prior included,
+        :meth:`ObservationModel.precision_out_of_basis`). The generalised
+        eigenproblem ``A v = d B v`` makes the density of ``l = log lambda*``
+        a sum over ``k``: ``shape l - rate e^l - 1/2 sum log(d_k + e^-l) -
+        1/2 sum c_k^2 / (d_k + e^-l)``, ``c = V^T e``; ``E[1 / lambda*]`` is
+        its quadrature on a grid of +-8 posterior SDs around the mode. This is
+        the calibration's conditional of ``lambda*`` with the emulator's
+        variance gone: the in-basis misfit that the discrepancy does not
+        explain stays in the noise.
+        """
+        from scipy import optimize
+
+        obs, q = self.observations, self.q
+        m = self.n_train
+        phi = float(values[obs.coordinate("phi", q)]) if q in obs.ar_outputs else 0.0
+        resid = obs.weights_of(q, obs.block(q)[1], phi) - model  # (m, p)
+        keep = np.all(np.isfinite(resid), axis=1)
+        prior = self.prior(values, None, theta)
+        p = resid.shape[1]
+        if prior.ndim == 4:
+            a = prior[:, :m, :, :m].reshape(p * m, p * m)
+        else:
+            a = linalg.block_diag(*[prior[j, :m, :m] for j in range(p)])
+        b = np.kron(obs.noise_block(q, 1.0, phi), np.eye(m))
+        rows = np.tile(keep, p)  # basis-major: basis j, period i -> j m + i
+        a, b = a[np.ix_(rows, rows)], b[np.ix_(rows, rows)]
+        d, v = linalg.eigh(0.5 * (a + a.T), 0.5 * (b + b.T), check_finite=False)
+        d = np.clip(d, 0.0, None)
+        c2 = (v.T @ resid[keep].T.reshape(-1)) ** 2
+        shape, rate = outside
+
+        def minus_log_post(ell: float) -> float:
+            s2 = d + math.exp(-ell)
+            return -(
+                shape * ell
+                - rate * math.exp(ell)
+                - 0.5 * float(np.sum(np.log(s2)))
+                - 0.5 * float(np.sum(c2 / s2))
+            )
+
+        centre = math.log(shape / rate)
+        best = optimize.minimize_scalar(
+            minus_log_post, bounds=(centre - 15.0, centre + 15.0), method="bounded"
+        )
+        mode = float(best.x)
+        h = 1e-3
+        curvature = (
+            minus_log_post(mode + h) - 2.0 * minus_log_post(mode) + minus_log_post(mode - h)
+        ) / (h * h)
+        sd = 1.0 / math.sqrt(curvature) if curvature > 0 else 1.0
+        grid = mode + np.linspace(-8.0, 8.0, 161) * sd
+        log_w = -np.array([minus_log_post(float(g)) for g in grid])
+        w = np.exp(log_w - log_w.max())
+        mean_variance = float(np.sum(w * np.exp(-grid)) / np.sum(w))
+        return 1.0 / mean_variance

@@ -67,14 +67,21 @@ class PredictSection(Section):
         default=0.3,
         gt=0,
     )
-    noise: Literal["simulator", "calibration"] = field_doc(
+    noise: Literal["simulator", "basis", "calibration"] = field_doc(
         "Observation noise in the bands of method = 'simulator': 'simulator' (the default) "
         "estimates each output's noise again at every draw from the re-run simulator's "
         "residuals on the training periods (its posterior mean given them; the "
         "calibration's lambda* also holds the emulator's own error, which a re-run "
         "simulator does not make, and its bands over-covered where the emulator was the "
-        "weak link); 'calibration' uses the draw's lambda*. Outputs with a discrepancy, "
-        "and the corrected prediction, always use lambda*.",
+        "weak link); for an output with an in-likelihood discrepancy, its conditional "
+        "given the run and the draw's discrepancy variance (the calibration's conditional "
+        "of lambda* without the emulator's variance), its discrepancy kriged with that "
+        "noise. 'basis': the same, but such an output's noise from the part of the "
+        "residuals its basis leaves alone (the discrepancy lies on the basis): it leaves "
+        "out the in-basis misfit the discrepancy's GP does not explain (too narrow on the "
+        "free-float box's test windows: the case-studies log). 'calibration' uses the "
+        "draw's lambda*. The corrected prediction (the difference process) always uses "
+        "lambda*.",
         "calibration",
         default="simulator",
     )

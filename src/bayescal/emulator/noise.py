@@ -557,6 +557,30 @@ class ObservationModel:
         r = r[:, np.all(np.isfinite(r), axis=0)]
         return o.prior[0] + 0.5 * r.size, o.prior[1] + 0.5 * float(np.sum(r * r))
 
+    def precision_out_of_basis(
+        self, q: int, resid: FloatArray, phi: float = 0.0
+    ) -> tuple[float, float]:
+        """Gamma ``(shape, rate)`` of ``lambda*`` of output ``q`` from what its basis leaves
+        of known residuals.
+
+        ``resid`` ``(n_o, m')`` as in :meth:`precision_given`. An output with an
+        in-likelihood discrepancy holds it on its basis weights, so the part of a
+        residual outside the basis (after prewhitening with ``phi`` for AR(1)
+        errors) is noise alone: ``(I - P) z`` with ``z`` the whitened residual and
+        ``P`` the projection on the whitened basis has covariance
+        ``(I - P) / lambda*``, which updates the prior with shape
+        ``m' (n_o - p_o) / 2`` and rate ``|(I - P) z|^2 / 2``, whatever the
+        discrepancy (the calibration's remainder term, :meth:`remainder`).
+        """
+        o = self.outputs[q]
+        r = np.asarray(resid, dtype=float)
+        r = r[:, np.all(np.isfinite(r), axis=0)]
+        kz = self._whitened_basis(q, phi)
+        z = ar1_whiten(r, phi) if o.model == "ar1" else r
+        w = linalg.lstsq(kz, z)[0]
+        e = z - kz @ w
+        return o.prior[0] + 0.5 * r.shape[1] * (o.n - o.p), o.prior[1] + 0.5 * float(np.sum(e * e))
+
     def noise_block(self, q: int, lam_star: float, phi: float = 0.0) -> FloatArray:
         """Covariance ``(p_o, p_o)`` of one period's observed-weight errors of output ``q``.
 

@@ -211,6 +211,13 @@ def keys_and_inputs(ctx: Context) -> tuple[dict[str, str], dict[str, dict[str, s
             if _likelihood_discrepancy(s)
             else []
         ),
+        # the simulator route's noise of an output with a discrepancy is its conditional
+        # given the run (it was the calibration's lambda*): such predictions anew
+        *(
+            [("discrepancy noise", "conditional given the run", False)]
+            if _likelihood_discrepancy(s) and s.predict.noise == "simulator"
+            else []
+        ),
         # the emulator route conditions on the test window's runs and no longer adds
         # 1/lambda to the noise: its predictions are computed anew
         *(

@@ -61,8 +61,8 @@ from bayescal.pipeline.predict import (
     predict_band,
     predictions_dataset,
     simulator_band,
-    simulator_noise,
 )
+from bayescal.pipeline.simnoise import simulator_noise
 from bayescal.pipeline.stages import (
     Context,
     Options,
@@ -237,8 +237,10 @@ def _simulator_band(
     model_train = level_values(ctx, {o: train_runs[o][rows_train] for o in names}, "simulated")
     drawn = pick[both]
     lam = posterior.lam_stars.reshape(-1, len(names))[drawn]
-    if discrepancy is None and section.noise == "simulator":
-        lam = simulator_noise(em.assembled, model_train, posterior, drawn)
+    if discrepancy is None:
+        lam = simulator_noise(
+            em.assembled, model_train, posterior, drawn, section.noise, em.emulator
+        )
     measured = {o: new_ctx.measured.outputs[o] for o in names}
     band = simulator_band(
         at,
@@ -248,7 +250,7 @@ def _simulator_band(
         discrepancy=discrepancy,
         measured=measured,
         model_error=conditioned_discrepancy(
-            em.emulator, em.assembled, posterior, drawn, model_train, at=at
+            em.emulator, em.assembled, posterior, drawn, model_train, at=at, lam_stars=lam
         ),
         transforms=ctx.transforms,
     )

@@ -27,10 +27,10 @@ say).
 
 With ``[predict] method = "simulator"`` the simulator itself is re-run at
 ``runs`` posterior draws (:func:`simulator_band`): exact physics at every draw,
-no emulator error. Its noise is
-estimated again at every draw from the run's residuals on the training periods
-(:func:`simulator_noise`; ``[predict] noise = "calibration"`` keeps lambda*):
-lambda* also holds the emulator's error, which the re-run simulator does not make.
+no emulator error. Its noise is estimated again at every draw from the run's
+residuals on the training periods (:func:`bayescal.pipeline.simnoise.simulator_noise`;
+``[predict] noise = "calibration"`` keeps lambda*): lambda* also holds the
+emulator's error, which the re-run simulator does not make.
 
 With ``method = "emulator"`` the emulator is also conditioned on the design
 runs over the test window (:func:`emulator_with_test_window`: they were simulated
@@ -90,7 +90,6 @@ __all__ = [
     "predict_band",
     "predictions_dataset",
     "simulator_band",
-    "simulator_noise",
 ]
 
 PAIRS_PER_CHUNK = 20_000
@@ -335,6 +334,7 @@ def conditioned_discrepancy(
     pick: np.ndarray,
     runs: Mapping[str, np.ndarray] | None = None,
     at: Assembled | None = None,
+    lam_stars: np.ndarray | None = None,
 ) -> dict[str, tuple[np.ndarray, np.ndarray]]:
     """The in-likelihood discrepancy conditioned on the training residuals, per draw and sample.
 
@@ -362,6 +362,11 @@ def conditioned_discrepancy(
         Another record to predict on: ``assembled`` with the layout and
         ``x_test`` of new conditions (:mod:`bayescal.pipeline.newdata`); the
         training residuals stay the study's. Default: the study's own record.
+    lam_stars
+        With ``runs``: the noise precisions ``(S, O)`` the residuals are kriged
+        with (:func:`bayescal.pipeline.simnoise.simulator_noise`: the re-run
+        simulator's noise, which holds no emulator error); default the draws'
+        ``lambda*``.
 
     Returns
     -------
@@ -401,6 +406,8 @@ def conditioned_discrepancy(
         for s in range(pick.size):
             values = dict(zip(posterior.aux_names, aux[s], strict=True))
             phi = float(values[obs.coordinate("phi", q)]) if q in obs.ar_outputs else 0.0
+            if runs is not None and lam_stars is not None:
+                values[obs.coordinate("lambda_star", q)] = float(lam_stars[s, q])
             if runs is not None:
                 y_sim = assembled.layout.cut(np.asarray(runs[name][s], float))
                 y_sim = (y_sim - st.mean[:, None]) / st.sd[:, None]
@@ -424,60 +431,6 @@ def conditioned_discrepancy(
                 col += x.shape[0]
         out[name] = (mean, var)
     return out
-
-
-def simulator_noise(
-    assembled: Assembled,
-    runs: Mapping[str, np.ndarray],
-    posterior: Posterior,
-    pick: np.ndarray,
-) -> np.ndarray:
-    """The observation noise of the re-run simulator's bands, as precisions ``(S, O)``.
-
-    The calibration's ``lambda*`` is the precision of what separates the
-    measurement from the *emulator* in the output basis: the sensor's noise, the
-    model's misfit and the emulator's own error. The simulator re-run at a draw
-    does not make the emulator's error, so with ``[predict] method = "simulator"``
-    every output's noise is estimated again at every draw ``s`` from the
-    residuals of the run on the training periods (training data only):
-    ``Gamma(a + N/2, b + Q/2)`` (:meth:`ObservationModel.precision_given`; ``a,
-    b`` the output's noise prior, ``N`` its training samples, ``Q`` the
-    residuals' sum of squares), and the band uses the posterior mean of the
-    noise variance, ``(b + Q/2) / (a + N/2 - 1)``, returned as its reciprocal.
-    A band is the distribution of one sample, so what it needs is the noise's
-    *marginal* variance (``1/lambda*`` for AR(1) errors too: ``R`` has a unit
-    diagonal), which the plain mean square estimates without bias whatever the
-    residuals' correlation. Whitening with the calibration's ``phi`` would not:
-    that ``phi`` describes the emulator's residuals, and whitening residuals
-    less correlated than it inflates them (by ``(1 + phi^2) / (1 - phi^2)``
-    for white ones). Outputs with an in-likelihood discrepancy keep the
-    calibration's ``lambda*`` (their residuals hold the discrepancy, which is
-    kriged separately).
-
-    Parameters
-    ----------
-    assembled
-        The assembled data (its measured training periods and standardisation).
-    runs
-        Output name -> the simulator at the draws ``(S, n_total)``.
-    posterior
-        The calibration posterior (``lambda*`` of the draws).
-    pick
-        Indices of the draws in the flattened draws ``(S,)``.
-    """
-    obs = assembled.observations
-    lam = np.array(posterior.lam_stars.reshape(-1, obs.n_outputs)[pick], dtype=float)
-    for q, noise in enumerate(obs.outputs):
-        if noise.discrepancy or noise.name not in runs:
-            continue
-        st = assembled.outputs.standardisations[q]
-        measured = obs.block(q)[1]
-        sims = assembled.layout.cut(np.asarray(runs[noise.name], dtype=float))
-        for s in range(pick.size):
-            resid = measured - (sims[s] - st.mean[:, None]) / st.sd[:, None]
-            shape, rate = obs.precision_given(q, resid)
-            lam[s, q] = (shape - 1.0) / rate
-    return lam
 
 
 def simulator_band(

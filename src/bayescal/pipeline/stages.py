@@ -48,9 +48,9 @@ from bayescal.pipeline.predict import (
     predict_band,
     predictions_dataset,
     simulator_band,
-    simulator_noise,
     windows,
 )
+from bayescal.pipeline.simnoise import simulator_noise
 from bayescal.runner import Progress, RunResults, run_design
 from bayescal.simulators.base import Derivable, Simulator
 
@@ -555,8 +555,10 @@ def _band(
     if route == "simulator":
         runs, lam_star, drawn = posterior_runs(ctx, posterior, section.runs)
         model_runs = level_values(ctx, {o: runs[o] for o in em.emulator.outputs.names}, "simulated")
-        if discrepancy is None and section.noise == "simulator":
-            lam_star = simulator_noise(em.assembled, model_runs, posterior, drawn)
+        if discrepancy is None:
+            lam_star = simulator_noise(
+                em.assembled, model_runs, posterior, drawn, section.noise, em.emulator
+            )
         band = simulator_band(
             em.assembled,
             model_runs,
@@ -565,7 +567,7 @@ def _band(
             discrepancy=discrepancy,
             measured=measured,
             model_error=conditioned_discrepancy(
-                em.emulator, em.assembled, posterior, drawn, model_runs
+                em.emulator, em.assembled, posterior, drawn, model_runs, lam_stars=lam_star
             ),
             transforms=transforms,
         )
