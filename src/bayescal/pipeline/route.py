@@ -7,9 +7,11 @@ subset of the simulator route's own draws, so that these runs are reused from
 the run cache if the simulator route is taken), and the emulator's mean at the
 same draws (conditioned on the design runs over the test window, as the
 emulator route's is: :func:`bayescal.pipeline.predict.emulator_with_test_window`)
-is compared with them on the test window. Those runs are held out: the emulator
-never saw them. When the root mean squared difference of every calibrated output
-is at most ``[predict] check_tolerance`` times the output's posterior noise SD,
+is compared with their part on the output basis (what the emulator predicts: its
+band holds the part off the basis apart) on the test window. Those runs are held
+out: the emulator never saw them. When the root mean squared difference of every
+calibrated output is at most ``[predict] check_tolerance`` times the output's
+posterior noise SD,
 the emulator route gives the bands; otherwise the simulator route does. Without
 a test window the training periods are compared instead.
 
@@ -98,11 +100,24 @@ def check_route(ctx: Context, em: EmulatorResult, posterior: Posterior) -> Route
     lam = posterior.lam_stars.reshape(-1, len(names))[pick[sims.indices]]
     mean, _ = period_moments(emulator, ok, lam, x, None, np.zeros(emulator.outputs.sd.shape))
     noise = {o: float(np.median(v)) for o, v in posterior.noise_sd().items()}
+    obs = assembled.observations
+    order = [o.name for o in obs.outputs]
+    cut = starts[None, :] + np.arange(layout.period)[:, None]  # (n, P) sample indices
     ratio: dict[str, float] = {}
     for name, sl in emulator.outputs.slices.items():
         series = np.full((len(ok), layout.n_total), np.nan)
         place_periods(layout, starts, mean[:, sl], series, begin)
-        diff = series - runs[name]
+        # the runs' part on the output basis: the emulator predicts the basis weights,
+        # and its band holds the out-of-basis part apart (lambda* and the test window's
+        # excess), so only the weights' error is the emulator's own
+        q = order.index(name)
+        st, ko = assembled.outputs.standardisations[q], obs.block(q)[0]
+        on_basis = np.full_like(series, np.nan)
+        for r in range(len(ok)):
+            y = (np.asarray(runs[name][r], dtype=float)[cut] - st.mean[:, None]) / st.sd[:, None]
+            fitted = st.mean[:, None] + st.sd[:, None] * (ko @ obs.weights_of(q, y).T)
+            place_periods(layout, starts, fitted, on_basis[r], begin)
+        diff = series - on_basis
         used = np.isfinite(diff)
         rms = float(np.sqrt(np.mean(diff[used] ** 2))) if used.any() else float("inf")
         ratio[name] = rms / noise[name] if name in noise else float("inf")
