@@ -3,7 +3,6 @@ and screening candidates held at their nominal values by ``run``."""
 
 from __future__ import annotations
 
-import shutil
 import tomllib
 from pathlib import Path
 
@@ -16,44 +15,17 @@ from bayescal.cli import main
 from bayescal.config import build_simulator, load_study
 from bayescal.config.edit import set_screen_flags
 from bayescal.errors import ConfigError
-from bayescal.pipeline import Options, run
+from bayescal.pipeline import run
 from bayescal.pipeline.screen import screen, screening_statistic
 from bayescal.simulators.wrappers import FixedParameters
-from paths import FIXTURES
+from screen_study import SERIAL, screen_study
 
 pytest.importorskip("SALib", reason="screening needs SALib")
-
-SERIAL = Options(backend="serial", chains_backend="serial")
-EXTRA = """
-[parameters.k_fb]
-# a candidate: the boards' conductivity
-unit = "W/(m·K)"
-nominal = 0.0316
-prior = { distribution = "uniform", lower = 0.025, upper = 0.04 }
-targets = ["board_out.conductivity", "board_in.conductivity"]
-screen = true
-
-[parameters.d_fb]
-unit = "kg/m3"
-nominal = 116.6
-prior = { distribution = "uniform", lower = 116.0, upper = 117.0 }
-targets = ["board_out.density", "board_in.density"]
-screen = true
-
-[screening]
-trajectories = 4
-bootstrap = 100
-threshold = 0.05
-"""
 
 
 @pytest.fixture
 def study_dir(tmp_path: Path) -> Path:
-    target = tmp_path / "wall"
-    shutil.copytree(FIXTURES / "wall-study", target)
-    path = target / "study.toml"
-    path.write_text(path.read_text(encoding="utf-8") + EXTRA, encoding="utf-8")
-    return target
+    return screen_study(tmp_path, "trajectories = 4\nbootstrap = 100\nthreshold = 0.05\n")
 
 
 def test_candidates_are_held_at_nominal_by_run(study_dir: Path) -> None:

@@ -4,7 +4,6 @@ parameters as Morris, its files and page, and its keys' one-line errors."""
 from __future__ import annotations
 
 import json
-import shutil
 from pathlib import Path
 
 import pandas as pd
@@ -14,42 +13,15 @@ from click.testing import CliRunner
 from bayescal.cli import main
 from bayescal.config import load_study
 from bayescal.errors import ConfigError
-from bayescal.pipeline import Options
 from bayescal.pipeline.screen import screen
-from paths import FIXTURES
+from screen_study import SERIAL, screen_study
 
 pytest.importorskip("SALib", reason="screening needs SALib")
 
-SERIAL = Options(backend="serial", chains_backend="serial")
-CANDIDATES = """
-[parameters.k_fb]
-unit = "W/(m·K)"
-nominal = 0.0316
-prior = { distribution = "uniform", lower = 0.025, upper = 0.04 }
-targets = ["board_out.conductivity", "board_in.conductivity"]
-screen = true
-
-[parameters.d_fb]
-unit = "kg/m3"
-nominal = 116.6
-prior = { distribution = "uniform", lower = 116.0, upper = 117.0 }
-targets = ["board_out.density", "board_in.density"]
-screen = true
-"""
-
-
-def _study(tmp_path: Path, screening: str, name: str = "wall") -> Path:
-    target = tmp_path / name
-    shutil.copytree(FIXTURES / "wall-study", target)
-    path = target / "study.toml"
-    text = path.read_text(encoding="utf-8") + CANDIDATES + "\n[screening]\n" + screening
-    path.write_text(text, encoding="utf-8")
-    return target
-
 
 def test_sobol_proposes_what_morris_proposes(tmp_path: Path) -> None:
-    sobol_dir = _study(tmp_path, 'method = "sobol"\nruns = 30\npaths = 20\nsaltelli = 512\n'
-                       "bootstrap = 100\nthreshold = 0.05\n")  # fmt: skip
+    sobol_dir = screen_study(tmp_path, 'method = "sobol"\nruns = 30\npaths = 20\nsaltelli = 512\n'
+                             "bootstrap = 100\nthreshold = 0.05\n")  # fmt: skip
     res = screen(load_study(sobol_dir), options=SERIAL)
     assert res.method == "sobol"
     assert res.design.runs == 30
@@ -73,7 +45,9 @@ def test_sobol_proposes_what_morris_proposes(tmp_path: Path) -> None:
     assert page.count("data:image/png;base64,") == 1
     assert "Sobol" in page
     # Morris on the same study proposes the same parameters, most influential first
-    morris_dir = _study(tmp_path, "trajectories = 4\nbootstrap = 100\nthreshold = 0.05\n", "m")
+    morris_dir = screen_study(
+        tmp_path, "trajectories = 4\nbootstrap = 100\nthreshold = 0.05\n", "m"
+    )
     morris = screen(load_study(morris_dir), options=SERIAL)
     assert set(morris.proposal.selected[:2]) == top
     assert set(morris.proposal.selected) == set(res.proposal.selected)
@@ -82,7 +56,7 @@ def test_sobol_proposes_what_morris_proposes(tmp_path: Path) -> None:
 
 
 def test_sobol_command_prints_the_indices(tmp_path: Path) -> None:
-    study = _study(tmp_path, 'method = "sobol"\nruns = 20\npaths = 5\nsaltelli = 256\n')
+    study = screen_study(tmp_path, 'method = "sobol"\nruns = 20\npaths = 5\nsaltelli = 256\n')
     result = CliRunner().invoke(main, ["screen", str(study), "--backend", "serial"])
     assert result.exit_code == 0, result.output
     assert "Sobol ST and S1 [95 %]" in result.output
@@ -102,12 +76,12 @@ def test_sobol_command_prints_the_indices(tmp_path: Path) -> None:
 )  # fmt: skip
 def test_bad_keys_are_one_line(tmp_path: Path, section: str, match: str) -> None:
     with pytest.raises(ConfigError, match=match) as info:
-        load_study(_study(tmp_path, section))
+        load_study(screen_study(tmp_path, section))
     assert "\n" not in str(info.value)
 
 
 def test_too_few_runs_is_one_line(tmp_path: Path) -> None:
-    study = load_study(_study(tmp_path, 'method = "sobol"\nruns = 5\n'))
+    study = load_study(screen_study(tmp_path, 'method = "sobol"\nruns = 5\n'))
     with pytest.raises(ConfigError, match=r"screening\.runs = 5 is too few for 5 parameters: "
                        r"the Sobol method's GP needs at least 7") as info:  # fmt: skip
         screen(study, options=SERIAL)
@@ -118,7 +92,7 @@ def test_the_budget_counts_the_hypercube(tmp_path: Path) -> None:
     from bayescal.data.measured import load_measured
     from bayescal.pipeline.budget import screening_need
 
-    study = load_study(_study(tmp_path, 'method = "sobol"\n'))
+    study = load_study(screen_study(tmp_path, 'method = "sobol"\n'))
     need = screening_need(study, load_measured(study))
     assert need.key == "screening.runs"
     assert need.detail.startswith("50 runs (Sobol's Latin hypercube)")  # 10 × 5 parameters

@@ -192,6 +192,7 @@ def screen(
     priors = study.screening_priors()
     seed = section.seed if section.seed is not None else derived_seed(study.study.seed, "screen")
     k = len(priors)
+    morris: MorrisDesign | None = None
     if section.method == "sobol":
         if k < 2:
             raise ConfigError(f"screening needs at least two parameters, got {list(priors)}")
@@ -212,10 +213,7 @@ def screen(
             note(lock.describe_taken_over())
         note(f"screen: {k} parameters ({len(study.candidates)} candidates), {plan}")
         runs = _run(study, measured, simulator, design, out / "simulations", options)
-        if section.method == "sobol":
-            result = _write_sobol(study, measured, design, seed, runs, out, start, note)
-        else:
-            result = _write(study, measured, morris, design, seed, runs, out, start)
+        result = _write(study, measured, morris, design, seed, runs, out, start, note)
     if apply:
         flags = {name: name not in result.proposal.selected for name in study.parameters}
         applied = set_screen_flags(study.path, flags)
@@ -250,58 +248,82 @@ def _run(
 def _write(
     study: Study,
     measured: MeasuredData,
-    morris: MorrisDesign,
+    morris: MorrisDesign | None,
     design: Design,
     seed: int,
     runs: RunResults,
     out: Path,
     start: float,
+    note: Say,
 ) -> ScreeningResult:
-    """The Morris indices of each calibrated output, the proposal and their files."""
+    """The indices of each calibrated output, the proposal and their files.
+
+    Morris indices of the trajectories ``morris`` or, where it is ``None``, the
+    Sobol indices of a GP fitted to the runs of the Latin hypercube ``design``.
+    """
     section = study.screening
     samples = _training_samples(measured)
     statistics = _statistics(study, measured, design, runs, samples)
-    indices = [
-        morris_indices(morris, values, output, bootstrap=section.bootstrap, seed=seed + 1 + k)
-        for k, (output, values) in enumerate(statistics.items())
-    ]
-    proposal = propose(indices, section.threshold, section.max_parameters)
     folder = out / store.FOLDER
-    facts = {
-        "parameters": f"{len(design.names)} ({len(study.candidates)} candidates)",
-        "runs": f"{design.runs} ({runs.n_cached} from the cache, {runs.n_failed} failed)",
-        "trajectories × levels": f"{section.trajectories} × {section.levels}",
-        "statistic": f"{section.statistic} over {samples.size} training samples",
-        "seconds": f"{time.perf_counter() - start:.1f}",
-    }
-    store.save_screening(
-        folder,
-        morris,
-        design.values,
-        indices,
-        proposal,
-        candidates=study.candidates,
-        statistic=section.statistic,
-        runs={"runs": design.runs, "cached": runs.n_cached, "failed": runs.n_failed},
-    )
-    page = write_screening_report(
-        folder,
-        indices,
-        proposal,
-        study_name=study.study.name,
-        candidates=study.candidates,
-        statistic=section.statistic,
-        facts=facts,
-    )
+    counts = {"runs": design.runs, "cached": runs.n_cached, "failed": runs.n_failed}
+
+    def summary(first: dict[str, str], own: dict[str, str]) -> dict[str, str]:
+        """The page's facts: ``first``, the runs, the method's ``own``, statistic and time."""
+        return {
+            **first,
+            "parameters": f"{len(design.names)} ({len(study.candidates)} candidates)",
+            "runs": f"{design.runs} ({runs.n_cached} from the cache, {runs.n_failed} failed)",
+            **own,
+            "statistic": f"{section.statistic} over {samples.size} training samples",
+            "seconds": f"{time.perf_counter() - start:.1f}",
+        }
+
+    indices: tuple[MorrisIndices | SobolIndices, ...]
+    if morris is not None:
+        found = [
+            morris_indices(morris, values, output, bootstrap=section.bootstrap, seed=seed + 1 + k)
+            for k, (output, values) in enumerate(statistics.items())
+        ]
+        proposal = propose(found, section.threshold, section.max_parameters)
+        facts = summary({}, {"trajectories × levels": f"{section.trajectories} × {section.levels}"})
+        store.save_screening(
+            folder, morris, design.values, found, proposal, candidates=study.candidates,
+            statistic=section.statistic, runs=counts,
+        )  # fmt: skip
+        page = write_screening_report(
+            folder, found, proposal, study_name=study.study.name, candidates=study.candidates,
+            statistic=section.statistic, facts=facts,
+        )  # fmt: skip
+        indices = tuple(found)
+    else:
+        sobol = _sobol(study, design, statistics, seed, note)
+        proposal = propose(sobol, section.threshold, section.max_parameters)
+        facts = summary(
+            {"method": "Sobol indices of a GP fitted to a Latin hypercube"},
+            {
+                "GP leave-one-out Q2": ", ".join(f"{ix.output} {ix.q2:.3f}" for ix in sobol),
+                "Saltelli base N × GP paths": f"{section.saltelli} × {section.paths}",
+            },
+        )
+        store.save_sobol(
+            folder, design, sobol, proposal, candidates=study.candidates,
+            statistic=section.statistic, runs=counts,
+        )  # fmt: skip
+        page = write_sobol_report(
+            folder, sobol, proposal, study_name=study.study.name, candidates=study.candidates,
+            statistic=section.statistic, facts=facts,
+        )  # fmt: skip
+        indices = tuple(sobol)
     return ScreeningResult(
-        design=morris,
+        design=design if morris is None else morris,
         runs=runs,
         statistics=statistics,
-        indices=tuple(indices),
+        indices=indices,
         proposal=proposal,
         folder=folder,
         page=page,
         seconds=time.perf_counter() - start,
+        method="sobol" if morris is None else "morris",
     )
 
 
@@ -319,20 +341,11 @@ def _statistics(
     return statistics
 
 
-def _write_sobol(
-    study: Study,
-    measured: MeasuredData,
-    design: Design,
-    seed: int,
-    runs: RunResults,
-    out: Path,
-    start: float,
-    note: Say,
-) -> ScreeningResult:
-    """The GP and Sobol indices of each calibrated output, the proposal and their files."""
+def _sobol(
+    study: Study, design: Design, statistics: dict[str, np.ndarray], seed: int, note: Say
+) -> list[SobolIndices]:
+    """The GP and Sobol indices of each output, with a note where the GP predicts poorly."""
     section = study.screening
-    samples = _training_samples(measured)
-    statistics = _statistics(study, measured, design, runs, samples)
     indices = []
     for k, (output, values) in enumerate(statistics.items()):
         found = sobol_indices(
@@ -346,35 +359,4 @@ def _write_sobol(
                 "raise [screening] runs or use method = 'morris'"
             )
         indices.append(found)
-    proposal = propose(indices, section.threshold, section.max_parameters)
-    folder = out / store.FOLDER
-    q2 = ", ".join(f"{ix.output} {ix.q2:.3f}" for ix in indices)
-    facts = {
-        "method": "Sobol indices of a GP fitted to a Latin hypercube",
-        "parameters": f"{len(design.names)} ({len(study.candidates)} candidates)",
-        "runs": f"{design.runs} ({runs.n_cached} from the cache, {runs.n_failed} failed)",
-        "GP leave-one-out Q2": q2,
-        "Saltelli base N × GP paths": f"{section.saltelli} × {section.paths}",
-        "statistic": f"{section.statistic} over {samples.size} training samples",
-        "seconds": f"{time.perf_counter() - start:.1f}",
-    }
-    counts = {"runs": design.runs, "cached": runs.n_cached, "failed": runs.n_failed}
-    store.save_sobol(
-        folder, design, indices, proposal, candidates=study.candidates,
-        statistic=section.statistic, runs=counts,
-    )  # fmt: skip
-    page = write_sobol_report(
-        folder, indices, proposal, study_name=study.study.name, candidates=study.candidates,
-        statistic=section.statistic, facts=facts,
-    )  # fmt: skip
-    return ScreeningResult(
-        design=design,
-        runs=runs,
-        statistics=statistics,
-        indices=tuple(indices),
-        proposal=proposal,
-        folder=folder,
-        page=page,
-        seconds=time.perf_counter() - start,
-        method="sobol",
-    )
+    return indices

@@ -33,6 +33,7 @@ matplotlib.use("Agg")
 
 import matplotlib.pyplot as plt
 import numpy as np
+from matplotlib.figure import Figure
 
 from bayescal import __version__
 from bayescal.atomic import atomic_write, atomic_write_text
@@ -63,6 +64,14 @@ def _slug(name: str) -> str:
     return "".join(c if c.isalnum() or c in "-_" else "_" for c in name)
 
 
+def _save(fig: Figure, path: Path) -> Path:
+    """Lay ``fig`` out, write it to ``path`` as PNG and close it."""
+    fig.tight_layout()
+    target = atomic_write(path, lambda f: fig.savefig(f, format="png", dpi=100))
+    plt.close(fig)
+    return target
+
+
 def plot_mu_sigma(path: Path, ix: MorrisIndices, candidates: Sequence[str], label: str) -> Path:
     """The mu*-sigma plane of one output, each parameter labelled, saved as PNG."""
     fig, ax = plt.subplots(figsize=(7.5, 5.5))
@@ -88,10 +97,7 @@ def plot_mu_sigma(path: Path, ix: MorrisIndices, candidates: Sequence[str], labe
     ax.legend(fontsize=8, loc="upper left")
     ax.set_title(f"Morris mu*-sigma: {ix.output} ({ix.trajectories} trajectories)")
     ax.grid(alpha=0.3)
-    fig.tight_layout()
-    target = atomic_write(path, lambda f: fig.savefig(f, format="png", dpi=100))
-    plt.close(fig)
-    return target
+    return _save(fig, path)
 
 
 def plot_mu_star(
@@ -110,10 +116,7 @@ def plot_mu_star(
     ax.legend(fontsize=8, loc="lower right")
     ax.set_title(f"Morris mu* with 95 % intervals: {ix.output}")
     ax.grid(alpha=0.3, axis="x")
-    fig.tight_layout()
-    target = atomic_write(path, lambda f: fig.savefig(f, format="png", dpi=100))
-    plt.close(fig)
-    return target
+    return _save(fig, path)
 
 
 def _table(header: Sequence[str], rows: Sequence[Sequence[object]]) -> str:
@@ -128,12 +131,61 @@ def _g(value: float) -> str:
     return "–" if not np.isfinite(value) else f"{value:.4g}"
 
 
+def _row(
+    ix: MorrisIndices | SobolIndices,
+    j: int,
+    candidates: Sequence[str],
+    selected: set[str],
+    cells: Sequence[object],
+) -> list[object]:
+    """A parameter's row of an output's table: rank, name, role, ``cells``, proposed."""
+    name = ix.names[j]
+    role = "candidate" if name in candidates else "calibrated"
+    return [int(ix.ranks[j]), name, role, *cells, "yes" if name in selected else ""]
+
+
 def _image(path: Path, caption: str) -> str:
     data = base64.b64encode(path.read_bytes()).decode("ascii")
     return (
         f'<figure><img alt="{html.escape(caption)}" src="data:image/png;base64,{data}">'
         f"<figcaption>{html.escape(caption)}</figcaption></figure>"
     )
+
+
+def _page(
+    folder: Path,
+    proposal: Proposal,
+    facts: Mapping[str, Any],
+    sections: Sequence[str],
+    *,
+    study_name: str,
+    measure: str,
+    short: str,
+    method: str,
+) -> Path:
+    """Write ``screening.html``: the proposal and ``facts``, then the outputs' ``sections``.
+
+    ``measure`` names the index the proposal compares (``short`` in the score's
+    heading); ``method`` is the sentence under the title (HTML, not escaped).
+    """
+    chosen = [[i + 1, n, f"{proposal.score[n]:.3f}", proposal.deciding[n]]
+              for i, n in enumerate(proposal.selected)]  # fmt: skip
+    cap = "" if proposal.max_parameters is None else f", at most {proposal.max_parameters}"
+    summary = (
+        f"<h2>Proposed parameters</h2><p>Parameters whose {measure} reaches "
+        f"{proposal.threshold:g} of the largest {short} for at least one output{cap}. Set "
+        "<code>screen = false</code> on them (<code>bayescal screen --apply</code> does) and "
+        "<code>screen = true</code> on the others.</p>"
+        + _table(["#", "parameter", f"score ({short}/max)", "deciding output"], chosen)
+        + _table(["", ""], [[k, v] for k, v in facts.items()])
+    )
+    title = html.escape(f"Screening: {study_name}")
+    page = (
+        f"<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'><title>{title}</title>"
+        f"<style>{CSS}</style></head><body><h1>{title}</h1><p class='note'>bayescal "
+        f"{html.escape(__version__)}; {method}</p>{summary}{''.join(sections)}</body></html>\n"
+    )
+    return atomic_write_text(folder / PAGE, page)
 
 
 def write_screening_report(
@@ -178,19 +230,10 @@ def write_screening_report(
         )
         order = np.argsort(-ix.mu_star, kind="stable")
         rows = [
-            [
-                int(ix.ranks[j]),
-                ix.names[j],
-                "candidate" if ix.names[j] in candidates else "calibrated",
-                _g(ix.mu_star[j]),
-                _g(ix.mu_star_conf[j]),
-                _g(ix.mu[j]),
-                _g(ix.sigma[j]),
-                f"{ix.normalised[j]:.3f}",
-                "yes" if ix.names[j] in selected else "",
-            ]
+            _row(ix, j, candidates, selected, [_g(ix.mu_star[j]), _g(ix.mu_star_conf[j]),
+                 _g(ix.mu[j]), _g(ix.sigma[j]), f"{ix.normalised[j]:.3f}"])
             for j in order
-        ]
+        ]  # fmt: skip
         header = ["rank", "parameter", "role", "mu*", "± 95 %", "mu", "sigma", "mu*/max",
                   "proposed"]  # fmt: skip
         sections.append(
@@ -200,26 +243,11 @@ def write_screening_report(
             + _image(scatter, f"mu*-sigma, {ix.output}")
             + _image(bars, f"mu* with 95 % intervals, {ix.output}")
         )
-    chosen = [[i + 1, n, f"{proposal.score[n]:.3f}", proposal.deciding[n]]
-              for i, n in enumerate(proposal.selected)]  # fmt: skip
-    cap = "" if proposal.max_parameters is None else f", at most {proposal.max_parameters}"
-    summary = (
-        "<h2>Proposed parameters</h2><p>Parameters whose mu* reaches "
-        f"{proposal.threshold:g} of the largest mu* for at least one output{cap}. Set "
-        "<code>screen = false</code> on them (<code>bayescal screen --apply</code> does) and "
-        "<code>screen = true</code> on the others.</p>"
-        + _table(["#", "parameter", "score (mu*/max)", "deciding output"], chosen)
-        + _table(["", ""], [[k, v] for k, v in facts.items()])
-    )
-    title = html.escape(f"Screening: {study_name}")
-    page = (
-        f"<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'><title>{title}</title>"
-        f"<style>{CSS}</style></head><body><h1>{title}</h1><p class='note'>bayescal "
-        f"{html.escape(__version__)}; Morris elementary effects (SALib) of the {statistic} "
-        f"of each output over the training periods.</p>{summary}{''.join(sections)}"
-        "</body></html>\n"
-    )
-    return atomic_write_text(folder / PAGE, page)
+    return _page(
+        folder, proposal, facts, sections, study_name=study_name, measure="mu*", short="mu*",
+        method=f"Morris elementary effects (SALib) of the {statistic} of each output over the "
+        "training periods.",
+    )  # fmt: skip
 
 
 def plot_sobol(
@@ -246,10 +274,7 @@ def plot_sobol(
     ax.legend(fontsize=8, loc="lower right")
     ax.set_title(f"Sobol indices with 95 % intervals: {ix.output} (GP Q2 {ix.q2:.2f})")
     ax.grid(alpha=0.3, axis="x")
-    fig.tight_layout()
-    target = atomic_write(path, lambda f: fig.savefig(f, format="png", dpi=100))
-    plt.close(fig)
-    return target
+    return _save(fig, path)
 
 
 def _interval(point: float, low: float, high: float) -> str:
@@ -282,18 +307,11 @@ def write_sobol_report(
         )
         s1_low, s1_high, st_low, st_high = ix.s1_lower, ix.s1_upper, ix.st_lower, ix.st_upper
         rows = [
-            [
-                int(ix.ranks[j]),
-                ix.names[j],
-                "candidate" if ix.names[j] in candidates else "calibrated",
-                _interval(ix.s1[j], s1_low[j], s1_high[j]),
-                _interval(ix.st[j], st_low[j], st_high[j]),
-                f"{ix.normalised[j]:.3f}",
-                _g(ix.lengths[j]),
-                "yes" if ix.names[j] in selected else "",
-            ]
+            _row(ix, j, candidates, selected, [_interval(ix.s1[j], s1_low[j], s1_high[j]),
+                 _interval(ix.st[j], st_low[j], st_high[j]), f"{ix.normalised[j]:.3f}",
+                 _g(ix.lengths[j])])
             for j in np.argsort(-ix.st, kind="stable")
-        ]
+        ]  # fmt: skip
         header = ["rank", "parameter", "role", "S1 [95 %]", "ST [95 %]", "ST/max",
                   "GP length scale", "proposed"]  # fmt: skip
         sd = _g(ix.sd) + (f" {unit}" if unit else "")
@@ -316,23 +334,9 @@ def write_sobol_report(
             + _table(header, rows)
             + _image(bars, f"Sobol indices with 95 % intervals, {ix.output}")
         )
-    chosen = [[i + 1, n, f"{proposal.score[n]:.3f}", proposal.deciding[n]]
-              for i, n in enumerate(proposal.selected)]  # fmt: skip
-    cap = "" if proposal.max_parameters is None else f", at most {proposal.max_parameters}"
-    summary = (
-        "<h2>Proposed parameters</h2><p>Parameters whose total Sobol index ST reaches "
-        f"{proposal.threshold:g} of the largest ST for at least one output{cap}. Set "
-        "<code>screen = false</code> on them (<code>bayescal screen --apply</code> does) and "
-        "<code>screen = true</code> on the others.</p>"
-        + _table(["#", "parameter", "score (ST/max)", "deciding output"], chosen)
-        + _table(["", ""], [[k, v] for k, v in facts.items()])
-    )
-    title = html.escape(f"Screening: {study_name}")
-    page = (
-        f"<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'><title>{title}</title>"
-        f"<style>{CSS}</style></head><body><h1>{title}</h1><p class='note'>bayescal "
-        f"{html.escape(__version__)}; Sobol indices (SALib) of the {statistic} of each output "
-        "over the training periods, computed on a GP fitted to a Latin hypercube of runs over "
-        f"the prior ranges.</p>{summary}{''.join(sections)}</body></html>\n"
-    )
-    return atomic_write_text(folder / PAGE, page)
+    return _page(
+        folder, proposal, facts, sections, study_name=study_name,
+        measure="total Sobol index ST", short="ST",
+        method=f"Sobol indices (SALib) of the {statistic} of each output over the training "
+        "periods, computed on a GP fitted to a Latin hypercube of runs over the prior ranges.",
+    )  # fmt: skip

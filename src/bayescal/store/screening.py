@@ -58,19 +58,31 @@ DESIGN_FILE: Final = "design.csv"
 SOBOL_FILE: Final = "sobol.csv"
 
 
+def _heads(
+    ix: MorrisIndices | SobolIndices, candidates: Sequence[str], statistic: str
+) -> list[dict[str, Any]]:
+    """The columns both tables open with, one row per parameter of one output."""
+    return [
+        {
+            "output": ix.output,
+            "statistic": statistic,
+            "parameter": name,
+            "candidate": name in candidates,
+        }
+        for name in ix.names
+    ]
+
+
 def indices_frame(
     indices: Sequence[MorrisIndices], candidates: Sequence[str], statistic: str
 ) -> pd.DataFrame:
     """The Morris indices of every output as one table (the rows of ``morris.csv``)."""
     rows = []
     for ix in indices:
-        for j, name in enumerate(ix.names):
+        for j, head in enumerate(_heads(ix, candidates, statistic)):
             rows.append(
                 {
-                    "output": ix.output,
-                    "statistic": statistic,
-                    "parameter": name,
-                    "candidate": name in candidates,
+                    **head,
                     "mu_star": ix.mu_star[j],
                     "mu_star_conf": ix.mu_star_conf[j],
                     "mu": ix.mu[j],
@@ -81,6 +93,46 @@ def indices_frame(
                 }
             )
     return pd.DataFrame(rows)
+
+
+def _points(values: np.ndarray, names: Sequence[str], unit: np.ndarray) -> pd.DataFrame:
+    """The rows of ``design.csv``: physical values, then the ``u:`` normalised ones."""
+    points = pd.DataFrame(values, columns=list(names))
+    points.index.name = "run"
+    for j, name in enumerate(names):
+        points[f"u:{name}"] = unit[:, j]
+    return points
+
+
+def _save(
+    folder: Path,
+    method: str,
+    table: pd.DataFrame,
+    proposal: Proposal,
+    details: Mapping[str, Any],
+    points: pd.DataFrame,
+) -> list[Path]:
+    """Write ``method``'s table, ``proposal.json`` and ``design.csv``; drop the other table.
+
+    ``proposal.json`` holds the proposal, then ``details`` (the method's keys).
+    """
+    folder.mkdir(parents=True, exist_ok=True)
+    name, other = (MORRIS_FILE, SOBOL_FILE) if method == "morris" else (SOBOL_FILE, MORRIS_FILE)
+    written = [atomic_write_text(folder / name, table.to_csv(index=False))]
+    (folder / other).unlink(missing_ok=True)  # the other method's table
+    document = {
+        "format": SCREENING_FORMAT,
+        "method": method,
+        "selected": list(proposal.selected),
+        "score": proposal.score,
+        "deciding_output": proposal.deciding,
+        "threshold": proposal.threshold,
+        "max_parameters": proposal.max_parameters,
+        **details,
+    }
+    written.append(atomic_write_json(folder / PROPOSAL_FILE, document))
+    written.append(atomic_write_text(folder / DESIGN_FILE, points.to_csv(lineterminator="\n")))
+    return written
 
 
 def save_screening(
@@ -115,18 +167,7 @@ def save_screening(
     runs
         Counts to record (runs, cached, failed, seconds...).
     """
-    folder.mkdir(parents=True, exist_ok=True)
-    frame = indices_frame(indices, candidates, statistic)
-    written = [atomic_write_text(folder / MORRIS_FILE, frame.to_csv(index=False))]
-    (folder / SOBOL_FILE).unlink(missing_ok=True)  # the other method's table
-    document = {
-        "format": SCREENING_FORMAT,
-        "method": "morris",
-        "selected": list(proposal.selected),
-        "score": proposal.score,
-        "deciding_output": proposal.deciding,
-        "threshold": proposal.threshold,
-        "max_parameters": proposal.max_parameters,
+    details = {
         "statistic": statistic,
         "candidates": list(candidates),
         "trajectories": design.trajectories,
@@ -134,14 +175,10 @@ def save_screening(
         "seed": design.seed,
         "runs": dict(runs),
     }
-    written.append(atomic_write_json(folder / PROPOSAL_FILE, document))
-    points = pd.DataFrame(values, columns=list(design.names))
-    points.index.name = "run"
+    points = _points(values, design.names, design.unit)
     points.insert(0, "trajectory", design.trajectory)
-    for j, name in enumerate(design.names):
-        points[f"u:{name}"] = design.unit[:, j]
-    written.append(atomic_write_text(folder / DESIGN_FILE, points.to_csv(lineterminator="\n")))
-    return written
+    table = indices_frame(indices, candidates, statistic)
+    return _save(folder, "morris", table, proposal, details, points)
 
 
 def sobol_frame(
@@ -151,13 +188,10 @@ def sobol_frame(
     rows = []
     for ix in indices:
         s1_lower, s1_upper, st_lower, st_upper = ix.s1_lower, ix.s1_upper, ix.st_lower, ix.st_upper
-        for j, name in enumerate(ix.names):
+        for j, head in enumerate(_heads(ix, candidates, statistic)):
             rows.append(
                 {
-                    "output": ix.output,
-                    "statistic": statistic,
-                    "parameter": name,
-                    "candidate": name in candidates,
+                    **head,
                     "S1": ix.s1[j],
                     "S1_conf": ix.s1_conf[j],
                     "S1_lower": s1_lower[j],
@@ -190,35 +224,11 @@ def save_sobol(
 ) -> list[Path]:
     """Write ``sobol.csv``, ``proposal.json`` and ``design.csv`` into ``folder``.
 
-    Parameters
-    ----------
-    folder
-        The screening folder (created if missing).
-    design
-        The Latin hypercube that was run.
-    indices
-        Sobol indices, one per output.
-    proposal
-        The proposed parameters.
-    candidates
-        Names of the screening candidates (the others are calibrated already).
-    statistic
-        The scalar screened (``"mean"`` or ``"rmse"``).
-    runs
-        Counts to record (runs, cached, failed...).
+    The parameters are those of :func:`save_screening`, but ``design`` is the
+    Latin hypercube that was run (its values are written) and ``indices`` are
+    Sobol indices, one per output.
     """
-    folder.mkdir(parents=True, exist_ok=True)
-    frame = sobol_frame(indices, candidates, statistic)
-    written = [atomic_write_text(folder / SOBOL_FILE, frame.to_csv(index=False))]
-    (folder / MORRIS_FILE).unlink(missing_ok=True)  # the other method's table
-    document = {
-        "format": SCREENING_FORMAT,
-        "method": "sobol",
-        "selected": list(proposal.selected),
-        "score": proposal.score,
-        "deciding_output": proposal.deciding,
-        "threshold": proposal.threshold,
-        "max_parameters": proposal.max_parameters,
+    details = {
         "measure": proposal.measure,
         "statistic": statistic,
         "candidates": list(candidates),
@@ -229,13 +239,9 @@ def save_sobol(
         "reliable": {ix.output: ix.reliable for ix in indices},
         "runs": dict(runs),
     }
-    written.append(atomic_write_json(folder / PROPOSAL_FILE, document))
-    points = pd.DataFrame(design.values, columns=list(design.names))
-    points.index.name = "run"
-    for j, name in enumerate(design.names):
-        points[f"u:{name}"] = design.unit[:, j]
-    written.append(atomic_write_text(folder / DESIGN_FILE, points.to_csv(lineterminator="\n")))
-    return written
+    points = _points(design.values, design.names, design.unit)
+    table = sobol_frame(indices, candidates, statistic)
+    return _save(folder, "sobol", table, proposal, details, points)
 
 
 def load_proposal(folder: Path) -> dict[str, Any]:
