@@ -7,16 +7,17 @@ days and a 2-day test window of white noise (SD sqrt(0.007) W/m²,
 ``compare_study.wall_data``), 20 design runs, 2 basis vectors, chains
 4 x (500 + 1000), the white error model and ``[predict] method = "auto"``
 (``runs`` 50, ``check_runs`` 5). ``bayescal.pipeline.run`` takes it up to
-predict twice: at the default ``check_tolerance`` (0.3) and at a loose 3.0
+predict twice: at the default ``check_tolerance`` (0.3) and at a tight 0.01
 (only the predict stage runs again: the tolerance is in its key alone). The
 tests check
 
 * the route is recorded in the predictions (``attrs["route"]``, one of the two),
   named by the line ``auto`` prints with its measured ratio (the emulator's RMS
-  error at the held-out runs over the noise SD), and follows the ratio: the
-  emulator route exactly where the ratio is at most the tolerance; the ratio is
-  the same at both tolerances, the loose one takes the emulator route on every
-  truth, and if the default took it everywhere the ratios are below 0.3;
+  error at the held-out runs, against their part on the output basis, over the
+  noise SD), and follows the ratio: the emulator route exactly where the ratio is
+  at most the tolerance; the ratio is the same at both tolerances, the default
+  takes the emulator route at 8 of 10 truths or more (this wall's emulator is
+  accurate) and the tight one the simulator route at every truth;
 * at each tolerance, pooled over the truths, the calibrated 95 % band covers the
   measured samples of the test window (and of the training periods) within
   0.92-0.98 and the 50 % band within 0.45-0.55, widened to 3.5 binomial
@@ -27,24 +28,14 @@ tests check
   quantile of Binomial(n, 0.95) (16 of 20 at 10 truths, 2 of 4 at 2).
 
 Measured over 10 truths (``BAYESCAL_VALIDATION_TRUTHS=10``, 960 test and 2880
-training samples pooled):
-
-* default tolerance: the simulator route on all 10 truths, ratios 0.85-1.56
-  (six of them 0.90-1.10); 95 % band 0.954 test / 0.957 train, 50 % band 0.522 / 0.496;
-* tolerance 3.0: the emulator route on all 10; 95 % band 0.973 test / 0.952
-  train, 50 % band 0.507 / 0.504;
-* parameters: 20 of 20 intervals cover their truths;
-* 4-7 s a truth for the whole pipeline on the 2-core machine, 1-2 s for the
-  second predict stage (about 75 s in all; 2 truths: about 15 s).
-
-On this wall the check's ratio is about that of the out-of-basis part of the
-design runs on the test window to the noise SD (0.97-1.56 over the same truths):
-the emulator's mean is the in-basis prediction, so the check counts as error what
-its band holds separately (the training share in lambda*, the rest as
-``Assembled.out_of_basis_excess``), and the default tolerance sends every truth
-to the simulator route although the emulator route's band holds its rates here
-too. 3, 4 or 8 basis vectors, ``pca_variance = 0.999`` or ``history_periods = 1``
-left the ratio at 0.7-1.25 on the first two truths.
+training samples pooled): at the default tolerance the emulator route at all 10
+truths, ratios 0.02-0.26; 95 % band 0.973 test / 0.952 train, 50 % band 0.507 /
+0.504; 20 of 20 parameter intervals cover their truths; 4-5 s a truth for the
+whole pipeline on the 2-core machine (about 60 s in all). Before the check
+compared with the runs' part on the basis it read 0.85-1.56 here (the runs'
+out-of-basis part, which the emulator route's band holds apart) and sent every
+truth to the simulator route (95 % band 0.954 / 0.957, 50 % 0.522 / 0.496): the
+tight pass keeps that route under test.
 """
 
 from __future__ import annotations
@@ -71,9 +62,9 @@ DATA_SEED = 3000
 CALIBRATED = ("k_cb", "cp_cb")
 TRAIN_DAYS, TEST_DAYS = 6, 2
 ROUTES = ("emulator", "simulator")
-#: ``check_tolerance`` of the two runs of every study: the default, and one above the
-#: error the check measures on this wall (so that "auto" takes the emulator route).
-TOLERANCES = {"default": None, "loose": 3.0}
+#: ``check_tolerance`` of the two runs of every study: the default, and one below the
+#: error the check measures on this wall (so that "auto" takes the simulator route).
+TOLERANCES = {"default": None, "tight": 0.01}
 
 pytestmark = pytest.mark.slow
 
@@ -89,7 +80,7 @@ class Predicted:
     inside95: dict[str, int]  # window -> measured samples inside the 95 % band
     inside50: dict[str, int]
     samples: dict[str, int]  # window -> measured samples scored
-    seconds: float  # the whole pipeline (default) or the predict stage alone (loose)
+    seconds: float  # the whole pipeline (default) or the predict stage alone (tight)
 
 
 @dataclass(frozen=True)
@@ -169,10 +160,10 @@ def one_truth(index: int, truth: dict[str, float], folder: Path) -> Case:
     for key, tolerance in TOLERANCES.items():  # the default first: it runs every stage
         predicted[key], results[key] = predict(folder, index, tolerance)
     post = results["default"].posterior
-    again = results["loose"].posterior
+    again = results["tight"].posterior
     assert post is not None
     assert again is not None
-    assert np.array_equal(post.draws, again.draws)  # the loose run reused the posterior
+    assert np.array_equal(post.draws, again.draws)  # the tight run reused the posterior
     lower, upper = post.interval(0.95)
     covered = {
         n: bool(lo <= truth[n] <= hi) for n, lo, hi in zip(post.names, lower, upper, strict=True)
@@ -245,12 +236,14 @@ def test_auto_records_its_route_and_its_bands_hold(cases: tuple[Case, ...], key:
 
 def test_the_route_follows_the_measured_error(cases: tuple[Case, ...]) -> None:
     default = [c.predicted["default"] for c in cases]
-    loose = [c.predicted["loose"] for c in cases]
+    tight = [c.predicted["tight"] for c in cases]
     # the same posterior and held-out runs: the same measured error at both tolerances
-    assert [p.ratio for p in default] == [p.ratio for p in loose]
-    if all(p.route == "emulator" for p in default):
-        assert all(p.ratio < p.tolerance for p in default), [p.ratio for p in default]
-    assert all(p.route == "emulator" for p in loose), [p.said for p in loose]
+    assert [p.ratio for p in default] == [p.ratio for p in tight]
+    # the emulator of this wall is accurate: the default takes its route at most truths
+    assert sum(p.route == "emulator" for p in default) >= 0.8 * len(default), [
+        p.said for p in default
+    ]
+    assert all(p.route == "simulator" for p in tight), [p.said for p in tight]
 
 
 def test_the_parameters_intervals_cover_the_truths(cases: tuple[Case, ...]) -> None:
