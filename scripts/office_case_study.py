@@ -99,17 +99,22 @@ def guideline14(study_dir: Path) -> pd.DataFrame:
     return frame.set_index("output")
 
 
-def _few_runs(path: Path) -> None:
-    """Switch a fresh copy of the office study to the settings of ``--few-runs``."""
+def _few_runs(path: Path, max_parameters: int = 8, design_runs: int | None = None) -> None:
+    """Switch a fresh copy of the office study to the settings of ``--few-runs``
+    (``design_runs``: a one-shot design of that many runs instead of the sequential one)."""
     data = tomllib.loads(path.read_text(encoding="utf-8"))
     data["screening"] = {
         "method": "sobol",
         "runs": 42,
         "statistic": "mean",
         "threshold": 0.0225,
-        "max_parameters": 8,
+        "max_parameters": max_parameters,
     }
-    data["design"] = {"runs": 24, "sequential": True, "batch": 12, "max_runs": 72}
+    data["design"] = (
+        {"runs": 24, "sequential": True, "batch": 12, "max_runs": 72}
+        if design_runs is None
+        else {"runs": design_runs}
+    )
     data["predict"] = {**data["predict"], "method": "auto"}
     path.write_text(tomli_w.dumps(data), encoding="utf-8")
 
@@ -129,6 +134,19 @@ def main(argv: list[str] | None = None) -> int:
         "(threshold 0.0225 = 0.15 squared), a sequential design (24 first runs, batches of "
         "12, at most 72) and [predict] method = 'auto'",
     )
+    parser.add_argument(
+        "--max-parameters",
+        type=int,
+        default=8,
+        help="--few-runs: most parameters the screening proposes (8)",
+    )
+    parser.add_argument(
+        "--design-runs",
+        type=int,
+        default=None,
+        help="--few-runs: a one-shot Latin hypercube of this many runs instead of the "
+        "sequential design",
+    )
     args = parser.parse_args(argv)
     folder: Path = args.out
     if args.fresh and folder.exists():
@@ -136,7 +154,7 @@ def main(argv: list[str] | None = None) -> int:
     if not (folder / "study.toml").is_file():
         copy_example("office", folder)
         if args.few_runs:
-            _few_runs(folder / "study.toml")
+            _few_runs(folder / "study.toml", args.max_parameters, args.design_runs)
     options = Options(backend=args.backend, jobs=args.jobs, scheduler=args.scheduler)
     start = time.perf_counter()
     screened = screen(load_study(folder), options=options, apply=True, say=print)
