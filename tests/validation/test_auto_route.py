@@ -42,6 +42,7 @@ from __future__ import annotations
 
 import math
 import os
+import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -52,8 +53,12 @@ from scipy import stats
 
 from bayescal.config import load_study
 from bayescal.pipeline import Options, Results, run
-from compare_study import STUDY, wall_data
+from compare_study import wall_data
 from virtual_wall import random_truth
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "scripts"))
+
+import predict_truths
 
 N_TRUTHS = int(os.environ.get("BAYESCAL_VALIDATION_TRUTHS", "2"))
 SEED = 20261205
@@ -93,22 +98,12 @@ class Case:
 
 
 def study_text(name: str, seed: int, tolerance: float | None) -> str:
-    """:data:`compare_study.STUDY` at this check's size, with ``method = "auto"``."""
-    text = STUDY.format(name=name, model="white")
-    edits = {
-        "seed = 11\n": f"seed = {seed}\n",
-        "test_samples = 48\n": f"test_samples = {48 * TEST_DAYS}\n",
-        "[design]\nruns = 8\n": "[design]\nruns = 20\n",
-        "burn = 60\nsamples = 20\n": "",  # the emulator's defaults
-        "burn = 150\nsamples = 200\nmax_samples = 200\n": (
-            "burn = 500\nsamples = 1000\nmax_samples = 1000\n"
-        ),
-    }
-    for old, new in edits.items():
-        if text.count(old) != 1:
-            raise RuntimeError(f"compare_study.STUDY changed: {old!r} not found once")
-        text = text.replace(old, new)
-    text += '\n[predict]\nmethod = "auto"\n'
+    """The study of ``scripts/predict_truths.py`` (:data:`compare_study.STUDY` at this
+    check's size) with ``method = "auto"`` added to its last table, ``[predict]``."""
+    text = predict_truths.study_text(name, seed, False, test_days=TEST_DAYS)
+    if not text.rstrip().split("\n[")[-1].startswith("predict]"):
+        raise RuntimeError("predict_truths.study_text no longer ends with [predict]")
+    text += 'method = "auto"\n'
     return text + ("" if tolerance is None else f"check_tolerance = {tolerance}\n")
 
 
