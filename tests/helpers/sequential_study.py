@@ -22,11 +22,15 @@ TRUTH = {"k_cb": 0.124, "cp_cb": 845.41, "cp_fb": 840.0}
 END = "2012-02-09T00:00"
 
 
-def record(truth: dict[str, float] | None = None, seed: int = 5) -> pd.DataFrame:
-    """The 14-day record at ``truth`` (default :data:`TRUTH`) with noise of ``seed``."""
+def record(
+    truth: dict[str, float] | None = None, seed: int = 5, periods: int = 13, test_days: int = 0
+) -> pd.DataFrame:
+    """The record at ``truth`` (default :data:`TRUTH`) with noise of ``seed``: one warm-up
+    day, ``periods`` daily periods and ``test_days`` (default 14 days in all)."""
     ve = virtual_experiment(
-        seed=seed, truth=truth or TRUTH, runs=5, periods=13, warmup_days=1, test_days=0
-    )
+        seed=seed, truth=truth or TRUTH, runs=5, periods=periods, warmup_days=1,
+        test_days=test_days,
+    )  # fmt: skip
     times = pd.date_range("2012-02-01", periods=ve.layout.n_total, freq="30min")
     return pd.DataFrame(
         {

@@ -25,7 +25,7 @@ from bayescal.pipeline.keys import stage_keys
 from bayescal.pipeline.seqdesign import HISTORY_FILE, STATE_FILE, shift_length
 from bayescal.pipeline.stages import prepare
 from compare_study import STUDY
-from virtual_wall import virtual_experiment
+from sequential_study import record
 
 #: A truth in a corner of the study's prior box (k_cb in [0.08, 0.16], cp_cb in [640, 960]).
 CORNER = {"k_cb": 0.152, "cp_cb": 680.0, "cp_fb": 840.0}
@@ -33,24 +33,9 @@ EXECUTE = sandbox.execute
 SEQUENTIAL = "[design]\nruns = 4\nsequential = true\nbatch = 4\nmax_runs = {cap}\n"
 
 
-def _record(seed: int, days: int) -> pd.DataFrame:
-    ve = virtual_experiment(
-        seed=seed, truth=CORNER, runs=5, periods=days, warmup_days=1, test_days=1
-    )
-    times = pd.date_range("2012-02-01", periods=ve.layout.n_total, freq="30min")
-    return pd.DataFrame(
-        {
-            "time": times.strftime("%Y-%m-%dT%H:%M:%S"),
-            "T_se": np.round(ve.boundary["temp_surf_out"], 6),
-            "T_si": np.round(ve.boundary["temp_surf_in"], 6),
-            "q_si": np.round(ve.measured["heat_flux_in"], 6),
-        }
-    )
-
-
 def _study(folder: Path, design: str, seed: int = 1, days: int = 6, long: bool = False) -> Path:
     folder.mkdir(parents=True, exist_ok=True)
-    _record(seed, days).to_csv(folder / "wall.csv", index=False)
+    record(CORNER, seed, periods=days, test_days=1).to_csv(folder / "wall.csv", index=False)
     text = STUDY.format(name=folder.name, model="white").replace("[design]\nruns = 8\n", design)
     if long:  # long enough chains for moments compared to 0.2 SD
         text = text.replace(

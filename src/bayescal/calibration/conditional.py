@@ -47,7 +47,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy import linalg
+from scipy import linalg, optimize
 
 from bayescal.calibration.orthogonal import Sensitivity, constrained_prior
 from bayescal.emulator.gp import Emulator
@@ -295,8 +295,6 @@ class OutputDiscrepancy:
         variance gone: the in-basis misfit that the discrepancy does not
         explain stays in the noise.
         """
-        from scipy import optimize
-
         obs, q = self.observations, self.q
         m = self.n_train
         phi = float(values[obs.coordinate("phi", q)]) if q in obs.ar_outputs else 0.0

@@ -29,8 +29,9 @@ class PredictSection(Section):
     )
     method: Literal["emulator", "simulator", "auto"] = field_doc(
         "'auto': run the simulator at `check_runs` of the `runs` posterior draws, held out "
-        "from the emulator, and take the emulator route when its error there (on the test "
-        "window) is at most `check_tolerance` noise SDs for every output, else the "
+        "from the emulator, and take the emulator route when its error there (its mean "
+        "against the runs' part on the output basis, on the test window) is at most "
+        "`check_tolerance` noise SDs for every output, else the "
         "simulator route (its runs then include those). "
         "Calibrated predictions from the simulator re-run at `runs` posterior draws (the "
         "default: exact physics, bands that hold their rate on test periods whose "
