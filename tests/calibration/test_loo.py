@@ -51,16 +51,23 @@ def test_period_density_is_the_gaussian_of_the_samples(
     if discrepancy:
         values["delta_rel_a"] = 0.3
     got = period_log_densities(obs, values, mean, var, ktk, variances, obs.ls_weights())
+    # each output's samples alone (what variants calibrating different outputs share)
+    alone = [
+        period_log_densities(obs, values, mean, var, ktk, variances, obs.ls_weights(), scored=[q])
+        for q in (0, 1)
+    ]
     for i in range(m):
         want = 0.0
-        for rows, bases, lam, ph, rel in (
+        for q, (rows, bases, lam, ph, rel) in enumerate((
             (slice(0, 7), [0, 1], 9.0, phi, 0.3 if discrepancy else 0.0),
             (slice(7, 12), [2], 4.0, 0.0, 0.0),
-        ):
+        )):  # fmt: skip
             kq = k[rows][:, bases]
             cov_w = np.diag(var[i, bases] + rel * variances[bases])
             cov = kq @ cov_w @ kq.T + _ar1_corr(kq.shape[0], ph) / lam
-            want += stats.multivariate_normal(kq @ mean[i, bases], cov).logpdf(y[rows, i])
+            part = stats.multivariate_normal(kq @ mean[i, bases], cov).logpdf(y[rows, i])
+            assert alone[q][i] == pytest.approx(part, rel=1e-10)
+            want += part
         assert got[i] == pytest.approx(want, rel=1e-10)
 
 
@@ -87,6 +94,9 @@ def test_a_discrepancy_over_the_conditions_is_kriged_from_the_other_periods(
         values["phi_a"] = phi
     over_x, independent = kind in ("conditions", "both"), kind in ("independent", "both")
     got = period_log_densities(obs, values, mean, var, ktk, variances, obs.ls_weights(), x_corr)
+    alone = period_log_densities(
+        obs, values, mean, var, ktk, variances, obs.ls_weights(), x_corr, scored=[0]
+    )
     # each sample's predictive mean and SD: the same conditional, sample by sample
     p_mu, p_sd = period_predictive(obs, values, mean, var, variances, obs.ls_weights(), x_corr)
     # output a: all periods' samples at once (period-major), conditioned period by period
@@ -107,6 +117,7 @@ def test_a_discrepancy_over_the_conditions_is_kriged_from_the_other_periods(
         c_mean = mu[own] + gain @ (ya[rest] - mu[rest])
         c_cov = cov[np.ix_(own, own)] - gain @ cov[np.ix_(rest, own)]
         want = stats.multivariate_normal(c_mean, c_cov).logpdf(ya[own])
+        assert alone[i] == pytest.approx(want, rel=1e-9)  # output a's samples alone
         kb = k[7:, 2:]
         c_b = kb @ np.diag(var[i, 2:]) @ kb.T + np.eye(5) / 4.0
         want += stats.multivariate_normal(kb @ mean[i, 2:], c_b).logpdf(y[7:, i])

@@ -13,7 +13,10 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from virtual_wall import PER_DAY, virtual_experiment
+from bayescal.simulators.base import Forcing
+from bayescal.simulators.fvm import Layer
+from bayescal.simulators.wall import MultilayerWall
+from virtual_wall import PER_DAY, STEP, virtual_experiment
 
 PHI = 0.9
 #: Training days, and one day each of warm-up and test window.
@@ -154,4 +157,56 @@ def write_variant(folder: Path, data: pd.DataFrame, model: str = "white") -> Pat
     (folder / "study.toml").write_text(
         STUDY.format(name=folder.name, model=model), encoding="utf-8"
     )
+    return folder
+
+
+#: SD of the interface thermometer's noise in :func:`two_sensor_data`. [K]
+TEMP_SD = 0.05
+
+
+def two_sensor_data(seed: int = 3, days: int = DAYS, bias: float = 0.0) -> pd.DataFrame:
+    """:func:`wall_data` with white flux noise and ``T_12``, the temperature at the
+    concrete / inside-board interface (the wall's ``temp_interface_2``) at the truth
+    with white noise of SD :data:`TEMP_SD`, plus ``bias`` [K]: a thermometer that
+    reads off by a constant, which no parameter of the model can explain (model error
+    the calibration may absorb into the parameters the flux also depends on)."""
+    data = wall_data(seed, days, phi=0.0)
+    layers = [
+        Layer("board_out", 0.027, 0.0316, 116.6, 840.0),
+        Layer("concrete", 0.15, 0.12, 552.0, 800.0),
+        Layer("board_in", 0.027, 0.0316, 116.6, 840.0),
+    ]
+    targets = {
+        "k_cb": ["concrete.conductivity"],
+        "cp_cb": ["concrete.specific_heat"],
+        "cp_fb": ["board_out.specific_heat", "board_in.specific_heat"],
+    }
+    wall = MultilayerWall(
+        layers, parameters=targets, boundary="surface", outputs=("temp_interface_2",)
+    )
+    bc = {"temp_surf_out": data["T_se"].to_numpy(), "temp_surf_in": data["T_si"].to_numpy()}
+    clean = wall.simulate(TRUTH, Forcing(STEP, bc))["temp_interface_2"]
+    rng = np.random.default_rng([seed, 12])
+    return data.assign(T_12=np.round(clean + bias + rng.normal(0.0, TEMP_SD, clean.size), 6))
+
+
+def write_sensors_variant(folder: Path, data: pd.DataFrame, outputs: tuple[str, ...]) -> Path:
+    """A study folder of :func:`two_sensor_data` calibrating ``outputs`` (white errors)."""
+    text = STUDY.format(name=folder.name, model="white")
+    text = text.replace(
+        'outputs = ["heat_flux_in"]', 'outputs = ["heat_flux_in", "temp_interface_2"]'
+    )
+    text = text.replace(
+        "[simulator]",
+        '[data.columns.temp_interface_2]\nsource = "T_12"\nunit = "degC"\n\n[simulator]',
+    )
+    listed = ", ".join(f'"{name}"' for name in outputs)
+    text = text.replace('calibrate = ["heat_flux_in"]', f"calibrate = [{listed}]")
+    if "heat_flux_in" not in outputs:
+        text = text.replace('[outputs.errors.heat_flux_in]\nmodel = "white"\n', "")
+    if "temp_interface_2" in outputs:
+        text += '\n[outputs.errors.temp_interface_2]\nmodel = "white"\n'
+    folder.mkdir(parents=True, exist_ok=True)
+    data.to_csv(folder / "wall.csv", index=False)
+    (folder / "study.toml").write_text(text, encoding="utf-8")
     return folder

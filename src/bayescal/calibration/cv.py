@@ -78,6 +78,8 @@ __all__ = [
     "log_jacobian",
     "paired_difference",
     "refit_period",
+    "scored_outputs",
+    "scored_rows",
     "thinned",
     "without_period",
 ]
@@ -106,6 +108,36 @@ def log_jacobian(sd: ArrayLike) -> float:
     if arr.ndim != 1 or not np.all(np.isfinite(arr) & (arr > 0.0)):
         raise ValueError("standardisation scales must be a 1-d array of positive numbers")
     return -float(np.sum(np.log(arr)))
+
+
+def scored_outputs(
+    observations: ObservationModel, names: Sequence[str] | None
+) -> tuple[int, ...] | None:
+    """The indices of the outputs ``names`` among ``observations.outputs`` (``None``
+    where they are all of them, or ``names`` is ``None``: every output scored).
+
+    Raises
+    ------
+    ValueError
+        No name, or a name that is not a calibrated output.
+    """
+    if names is None:
+        return None
+    known = [o.name for o in observations.outputs]
+    unknown = [n for n in names if n not in known]
+    if unknown or not names:
+        raise ValueError(
+            f"cannot score {unknown or 'no output'}: the calibrated outputs are {known}"
+        )
+    picked = tuple(sorted({known.index(n) for n in names}))
+    return None if len(picked) == len(known) else picked
+
+
+def scored_rows(observations: ObservationModel, scored: Sequence[int] | None) -> NDArray[np.intp]:
+    """The rows of the stacked samples that belong to the outputs ``scored`` (all: ``None``)."""
+    if scored is None:
+        return np.arange(observations.y_star.shape[0])
+    return np.concatenate([np.arange(*observations.outputs[q].rows) for q in scored])
 
 
 def without_period(observations: ObservationModel, period: int) -> ObservationModel:
@@ -391,6 +423,7 @@ def leave_period_out(
     algebra: Kind = "kronecker",
     draws_per_chain: int = 250,
     callback: Tick | None = None,
+    outputs: Sequence[str] | None = None,
 ) -> PeriodScores:
     """PSIS leave-one-period-out ``elpd_i`` of a calibration, in physical units.
 
@@ -408,9 +441,19 @@ def leave_period_out(
         Draws per chain used (thinned evenly).
     callback
         Progress: called with the number of periods done.
+    outputs
+        The calibrated outputs whose samples are scored (``None``: all). Every
+        output of the period is left out (the importance weights are those of the
+        calibration without the whole period); the score and the PIT are those of
+        these outputs' samples alone: how variants that calibrate different sets
+        of outputs compare on the outputs they share.
     """
+    scored = scored_outputs(observations, outputs)
+    rows = scored_rows(observations, scored)
     post = thinned(posterior, draws_per_chain)
-    loglik, mu, sd = pointwise_scores(emulator, observations, post, post.unit_draws.shape[1])
+    loglik, mu, sd = pointwise_scores(
+        emulator, observations, post, post.unit_draws.shape[1], scored
+    )
     chains, draws, m = loglik.shape
     flat = loglik.reshape(-1, m)  # (S, m*)
     points = np.concatenate([post.unit_draws, post.aux], axis=-1).reshape(chains * draws, -1)
@@ -429,14 +472,14 @@ def leave_period_out(
         warnings.simplefilter("ignore")  # ArviZ warns about high k; we report it per period
         log_w, k = az.psislw(safe, _relative_efficiency(post))
     k = np.where(bad | ~np.isfinite(k), np.inf, np.asarray(k, dtype=float))
-    jac = log_jacobian(emulator.outputs.sd)
+    jac = log_jacobian(emulator.outputs.sd[rows])
     psis = logsumexp(np.asarray(log_w) + flat.T, axis=1) + jac
     lppd = logsumexp(flat, axis=0) - math.log(flat.shape[0]) + jac
     n = observations.y_star.shape[0]
     pit = loo_pit(
-        observations.y_star,
-        mu.reshape(-1, n, m),
-        sd.reshape(-1, n, m),
+        observations.y_star[rows],
+        mu.reshape(-1, n, m)[:, rows],
+        sd.reshape(-1, n, m)[:, rows],
         np.asarray(log_w).reshape(m, -1),
     )
     return PeriodScores(
@@ -466,6 +509,7 @@ def refit_period(
     callback: Tick | None = None,
     moves: Moves = "gibbs",
     held: ArrayLike | None = None,
+    outputs: Sequence[str] | None = None,
 ) -> tuple[float, Posterior, FloatArray]:
     """``elpd_i`` of ``period`` by an exact refit without its measurements (physical units).
 
@@ -497,7 +541,12 @@ def refit_period(
         theta* on the normalised scale ``(t,)`` held fixed, as the posterior's
         (:func:`bayescal.calibration.target.hold_theta`: the catalogue model);
         ``None``: sampled.
+    outputs
+        The calibrated outputs whose samples are scored (``None``: all), as
+        :func:`leave_period_out`.
     """
+    scored = scored_outputs(observations, outputs)
+    rows = scored_rows(observations, scored)
     target = held_out_target(emulator, observations, list(priors.values()), period, algebra)
     names = tuple(priors)
     chains = sample(
@@ -527,12 +576,16 @@ def refit_period(
         noise=observations.outputs,
     )
     post = thinned(refit, draws_per_chain)
-    loglik, mu, sd = pointwise_scores(emulator, observations, post, post.unit_draws.shape[1])
+    loglik, mu, sd = pointwise_scores(
+        emulator, observations, post, post.unit_draws.shape[1], scored
+    )
     column = loglik[..., period].reshape(-1)
     value = float(logsumexp(column)) - math.log(column.size)
     n, m = observations.y_star.shape
-    pit = loo_pit(observations.y_star, mu.reshape(-1, n, m), sd.reshape(-1, n, m))[:, period]
-    return value + log_jacobian(emulator.outputs.sd), refit, pit
+    pit = loo_pit(
+        observations.y_star[rows], mu.reshape(-1, n, m)[:, rows], sd.reshape(-1, n, m)[:, rows]
+    )[:, period]
+    return value + log_jacobian(emulator.outputs.sd[rows]), refit, pit
 
 
 def paired_difference(best: ArrayLike, other: ArrayLike) -> tuple[float, float]:

@@ -28,6 +28,7 @@ period is unreliable: the report says so).
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -88,10 +89,18 @@ def pointwise_scores(
     observations: ObservationModel,
     posterior: Posterior,
     draws_per_chain: int = 250,
+    scored: Sequence[int] | None = None,
 ) -> tuple[FloatArray, FloatArray, FloatArray]:
     """``l_is`` ``(chains, draws, m*)`` and every sample's left-out predictive mean and
     SD at every draw ``(chains, draws, n, m*)`` each (:func:`period_predictive`;
     standardised units).
+
+    ``scored``: the indices of the outputs (``observations.outputs``) whose
+    samples ``l_is`` is the density of (``None``: all). Given a draw the outputs'
+    left-out predictions are independent (each has its own basis vectors, error
+    model and discrepancy), so the density of some outputs' samples is the sum of
+    their terms: what a variant that calibrates more outputs is scored on, beside
+    one that calibrates fewer (``bayescal compare`` across output sets).
     """
     chains, n_draws = posterior.unit_draws.shape[:2]
     pick = _thin(n_draws, draws_per_chain)
@@ -116,7 +125,7 @@ def pointwise_scores(
             values = dict(zip(names, aux[c, s], strict=True))
             f = None if sensitivity is None else sensitivity(unit[c, s], values["lambda"])
             parts = _left_out(obs, values, mean, var, variances, ls_weights, x_corr, f)
-            out[c, s] = _densities(obs, parts)  # period_log_densities, once per draw
+            out[c, s] = _densities(obs, parts, scored)  # period_log_densities, once per draw
             mus[c, s], sds[c, s] = _predictive(obs, mean, parts)  # period_predictive
     return out, mus, sds
 
@@ -160,6 +169,7 @@ def period_log_densities(
     ls_weights: FloatArray,
     x_corr: FloatArray | None = None,
     constraint: FloatArray | None = None,
+    scored: Sequence[int] | None = None,
 ) -> FloatArray:
     """Log density of every period's measurements ``(m*,)`` at one draw.
 
@@ -186,9 +196,12 @@ def period_log_densities(
     constraint
         ``F`` ``(p, m*, K)`` of the orthogonal discrepancies at the draw
         (:class:`~bayescal.calibration.orthogonal.Sensitivity`); needs ``x_corr``. [-]
+    scored
+        The indices of the outputs whose samples are scored (``None``: all; the
+        others are predicted all the same, and left out of the sum).
     """
     parts = _left_out(obs, values, mean, var, variances, ls_weights, x_corr, constraint)
-    return _densities(obs, parts)
+    return _densities(obs, parts, scored)
 
 
 def _left_out(
@@ -212,10 +225,14 @@ def _left_out(
 
 
 def _densities(
-    obs: ObservationModel, parts: list[tuple[_OutputPart, FloatArray, FloatArray]]
+    obs: ObservationModel,
+    parts: list[tuple[_OutputPart, FloatArray, FloatArray]],
+    scored: Sequence[int] | None = None,
 ) -> FloatArray:
     total = np.zeros(obs.y_star.shape[1])
-    for part, resid, cov in parts:
+    for q, (part, resid, cov) in enumerate(parts):
+        if scored is not None and q not in scored:
+            continue
         chol = np.linalg.cholesky(cov)
         half = np.linalg.solve(chol, resid[:, :, None])[:, :, 0]
         in_basis = -0.5 * (

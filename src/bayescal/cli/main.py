@@ -644,6 +644,15 @@ def report(study: Path) -> None:
     "the error model fitted on the same emulator, one row per distinct error model; a "
     "WARNING line says when calibration does not beat it by more than one SE.",
 )
+@click.option(
+    "--on",
+    "on",
+    multiple=True,
+    metavar="OUTPUT",
+    help="Score only this calibrated output (repeat for several); each must be "
+    "calibrated by every study. Default: the outputs every study calibrates, so that "
+    "variants calibrating different outputs are ranked on those they share.",
+)
 @simulation_options
 @click.option("--quiet", "-q", is_flag=True, help="No progress bars or notes; the table only.")
 @user_errors
@@ -653,6 +662,7 @@ def compare(
     max_refits: int,
     draws: int,
     catalogue: bool,
+    on: tuple[str, ...],
     jobs: int | None,
     backend: str | None,
     scheduler: str | None,
@@ -675,6 +685,12 @@ def compare(
     check, and a note says where one misses its rate by more than two SE or a
     period is predicted confidently wrong. Only the training periods are read:
     the test window is left for the final metrics of the variant chosen.
+
+    Variants may calibrate different outputs (the inside heat flux alone, or
+    the flux and a temperature inside the wall): they are then scored on the
+    outputs that all of them calibrate (or those named by --on), each training
+    period left out whole, so that a second sensor counts by what it teaches
+    the calibration about the shared one.
 
     Before it starts it prints an order of magnitude of its cost (each
     variant's emulator and calibration from its sizes, and up to --max-refits
@@ -707,5 +723,6 @@ def compare(
         draws_per_chain=draws,
         say=(lambda _: None) if quiet else click.echo,
         catalogue=catalogue,
+        on=on,
     )
     click.echo(comparison_text(result.table, result.notes, result.files, result.warnings))

@@ -121,12 +121,14 @@ def score_catalogue(
     max_refits: int,
     draws_per_chain: int,
     say: Say,
+    outputs: tuple[str, ...] | None = None,
 ) -> tuple[PeriodScores, tuple[str, ...]]:
     """The catalogue model's leave-one-period-out scores and its chains' diagnostic warnings.
 
     The fit runs only where the output folder does not hold its scores and
     diagnostics for the same key (the calibrate stage's key, the draws and
-    ``"catalogue"``).
+    ``"catalogue"``). ``outputs``: the calibrated outputs scored (``None``: all),
+    as :func:`~bayescal.pipeline.scores.score_calibration`.
     """
     key = scores_key(ctx, em, draws_per_chain, CATALOGUE)
     warnings = _saved_warnings(ctx, key)
@@ -155,6 +157,7 @@ def score_catalogue(
         file=FILE,
         what=(CATALOGUE,),
         held=held,
+        outputs=outputs,
     )
     return scores, tuple(warnings or ())
 

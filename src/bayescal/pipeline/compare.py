@@ -4,9 +4,13 @@ Each study folder is one *variant* of the same calibration problem (another
 parameter set, other priors, another error model, the in-likelihood
 discrepancy on or off, another standardisation). :func:`compare`
 
-1. checks that every variant predicts the same measurements: the same
-   calibrated outputs and, sample for sample, the same measured values at the
-   same instants in the same training periods (else it refuses in one line);
+1. checks that every variant predicts the same measurements: at least one
+   calibrated output in common and, sample for sample, the same measured values
+   of the shared outputs at the same instants in the same training periods (else
+   it refuses in one line); variants that calibrate different outputs (the inside
+   heat flux alone, or the flux and a temperature inside the wall) are scored on
+   the outputs they all calibrate (:func:`scored_on`; ``on`` narrows them), each
+   period left out whole;
 2. runs each study up to its ``calibrate`` stage, or reuses the stages
    already in its output folder (:func:`bayescal.pipeline.run`);
 3. scores every training period left out in turn
@@ -70,6 +74,7 @@ __all__ = [
     "compare",
     "relative_jacobian",
     "same_training_data",
+    "scored_on",
 ]
 
 Say = Callable[[str], None]
@@ -103,6 +108,10 @@ class Variant:
         The MCMC diagnostics its calibration failed (R-hat, ESS, stuck chains,
         divergences; empty where every one passed): its scores rest on those
         chains, so the tables mark it.
+    catalogue_of
+        For the catalogue model's row, the variant whose error model it has.
+    scored_on
+        The calibrated outputs its scores are the density of (:func:`scored_on`).
     """
 
     label: str
@@ -111,6 +120,7 @@ class Variant:
     settings: dict[str, str] = field(default_factory=dict)
     diagnostics: tuple[str, ...] = ()
     catalogue_of: str = ""
+    scored_on: tuple[str, ...] = ()
 
     @property
     def model(self) -> str:
@@ -169,29 +179,36 @@ def _when(times: np.ndarray, index: int) -> str:
     return str(np.datetime_as_string(times[index], unit="m")).replace("T", " ")
 
 
-def same_training_data(a: tuple[str, Context], b: tuple[str, Context]) -> None:
-    """Refuse in one line unless ``b`` predicts exactly the training measurements of ``a``.
+def same_training_data(
+    a: tuple[str, Context], b: tuple[str, Context], outputs: Sequence[str] | None = None
+) -> None:
+    """Refuse in one line unless ``b`` predicts exactly the training measurements of ``a``
+    (of the calibrated outputs they share, among ``outputs`` where given: those scored).
 
     Raises
     ------
     ConfigError
-        Naming the first difference: calibrated outputs, number or length of
-        the training periods, their instants, or a measured value.
+        Naming the first difference: no calibrated output in common, number or
+        length of the training periods, their instants, or a measured value of
+        a shared output.
     """
     (la, ca), (lb, cb) = a, b
-    why = _first_difference(la, ca, lb, cb)
+    why = _first_difference(la, ca, lb, cb, outputs)
     if why is not None:
         raise ConfigError(
             f"cannot compare {la} and {lb}: {why}",
-            hint="the variants of a comparison need the same data file, columns, training "
-            "periods and calibrated outputs",
+            hint="the variants of a comparison need the same data file, columns and training "
+            "periods, and at least one calibrated output in common",
         )
 
 
-def _first_difference(la: str, ca: Context, lb: str, cb: Context) -> str | None:
+def _first_difference(
+    la: str, ca: Context, lb: str, cb: Context, outputs: Sequence[str] | None = None
+) -> str | None:
     oa, ob = ca.study.outputs.calibrate, cb.study.outputs.calibrate
-    if sorted(oa) != sorted(ob):
-        return f"{la} calibrates {list(oa)}, {lb} {list(ob)}"
+    shared = [name for name in oa if name in ob and (outputs is None or name in outputs)]
+    if not shared:
+        return f"{la} calibrates {list(oa)}, {lb} {list(ob)}: no output in common to score"
     ya, yb = ca.measured.layout, cb.measured.layout
     if (ya.m_star, ya.period) != (yb.m_star, yb.period):
         return (
@@ -207,7 +224,7 @@ def _first_difference(la: str, ca: Context, lb: str, cb: Context) -> str | None:
             f"their training periods differ in time ({_when(ta, k)} UTC in {la}, "
             f"{_when(tb, k)} UTC in {lb})"
         )
-    for name in oa:
+    for name in shared:
         va = np.asarray(ca.measured.outputs[name], dtype=float)[idx_a]
         vb = np.asarray(cb.measured.outputs[name], dtype=float)[idx_b]
         same = (va == vb) | (np.isnan(va) & np.isnan(vb))
@@ -218,6 +235,56 @@ def _first_difference(la: str, ca: Context, lb: str, cb: Context) -> str | None:
                 f"{_when(ta, k)} UTC: {va[k]:.6g} in {la}, {vb[k]:.6g} in {lb})"
             )
     return None
+
+
+def scored_on(
+    labels: Sequence[str], studies: Sequence[Study], on: Sequence[str] = ()
+) -> tuple[tuple[str, ...], list[str]]:
+    """The calibrated outputs every variant is scored on, and a note where that is not
+    every output of every variant.
+
+    The outputs all the variants calibrate (in the first variant's order), or
+    those of them named in ``on``. A variant that calibrates more outputs is
+    scored on these alone: each training period is left out whole (every output's
+    samples), and the score is the density of the shared outputs' samples under
+    the calibration on the other periods, so what the other outputs teach the
+    calibration counts, and their own fit does not.
+
+    Raises
+    ------
+    ConfigError
+        No output calibrated by every variant, or an output of ``on`` that is not.
+    """
+    sets = [tuple(s.outputs.calibrate) for s in studies]
+    shared = tuple(n for n in sets[0] if all(n in other for other in sets))
+    if not shared:
+        listed = "; ".join(f"{a} {list(b)}" for a, b in zip(labels, sets, strict=True))
+        raise ConfigError(
+            f"cannot compare: no output is calibrated by every variant, no output in common "
+            f"to score ({listed})",
+            hint="the variants of a comparison need at least one calibrated output in common",
+        )
+    if on:
+        missing = [n for n in on if n not in shared]
+        if missing:
+            raise ConfigError(
+                f"cannot score on {', '.join(missing)}: the outputs every variant calibrates "
+                f"are {', '.join(shared)}",
+                hint="--on takes outputs that every study's [outputs] calibrate lists",
+            )
+        shared = tuple(n for n in shared if n in on)
+    if all(set(outs) == set(shared) for outs in sets):
+        return shared, []
+    more = [
+        f"{label} also {', '.join(n for n in outs if n not in shared)}"
+        for label, outs in zip(labels, sets, strict=True)
+        if set(outs) != set(shared)
+    ]
+    return shared, [
+        f"scored on {', '.join(shared)} alone ({'; '.join(more)}): each training period is "
+        "left out whole and only these outputs' samples are scored, so the other outputs "
+        "count through what they teach the calibration, not through their own fit"
+    ]
 
 
 def _calibrated(label: str, study: Study, options: Options, say: Say) -> Results:
@@ -235,12 +302,13 @@ def _score(
     max_refits: int,
     draws_per_chain: int,
     say: Say,
+    outputs: tuple[str, ...],
 ) -> PeriodScores:
     em, post = res.emulator, res.posterior
     if em is None or post is None:  # pragma: no cover - run(until="calibrate") gives both
         raise ConfigError(f"{label}: the calibrate stage did not finish")
     return score_calibration(
-        label, res.context, em, post, options, max_refits, draws_per_chain, say
+        label, res.context, em, post, options, max_refits, draws_per_chain, say, outputs=outputs
     )
 
 
@@ -270,6 +338,7 @@ def _tables(variants: Sequence[Variant], times: list[str]) -> tuple[pd.DataFrame
                 "loo_band50": s.band_coverage(0.50),
                 "loo_band50_se": s.band_coverage_se(0.50),
                 "loo_band95_worst": _worst(s.band_shares(0.95)),
+                "scored_on": " ".join(v.scored_on),
                 "diagnostics": "failed" if v.diagnostics else "passed",
                 "diagnostic_warnings": len(v.diagnostics),
                 **v.settings,
@@ -376,6 +445,7 @@ def compare(
     draws_per_chain: int = 250,
     say: Say | None = None,
     catalogue: bool = True,
+    on: Sequence[str] = (),
 ) -> Comparison:
     """Rank the variants ``paths`` by leave-one-period-out ELPD and write the comparison.
 
@@ -403,13 +473,18 @@ def compare(
         distinct error model among the variants, and say loudly
         (``Comparison.warnings``) where it is at least as good as the best
         calibrated variant of its error model.
+    on
+        Score only these calibrated outputs (each calibrated by every variant);
+        empty: the outputs every variant calibrates (:func:`scored_on`).
+        Variants that calibrate different outputs are compared on those they share.
 
     Raises
     ------
     ConfigError
         Fewer than two studies (none with ``catalogue``), the same study twice,
-        a study not found, or
-        variants that do not share their training measurements.
+        a study not found, variants that do not share their training
+        measurements or no calibrated output, or an output of ``on`` that is not
+        calibrated by every variant.
     BayescalError
         A study's stages up to ``calibrate`` failed (its label first).
     """
@@ -433,8 +508,11 @@ def compare(
         raise ConfigError(f"{folder} exists and is not a folder", hint="give --output a folder")
     labels = _labels(studies)
     contexts = [(label, prepare(s, opts)) for label, s in zip(labels, studies, strict=True)]
+    shared, on_notes = scored_on(labels, studies, on)
     for other in contexts[1:]:
-        same_training_data(contexts[0], other)
+        same_training_data(contexts[0], other, shared)
+    for line in on_notes:
+        note(line)
     sources = cat.catalogue_labels(labels, [_settings(s)["error_model"] for s in studies])
     if not catalogue:
         sources = {}
@@ -443,18 +521,25 @@ def compare(
     for k, (label, study) in enumerate(zip(labels, studies, strict=True), start=1):
         note(f"variant {k} of {len(studies)}: {label}")
         res = _calibrated(label, study, opts, note)
-        scores = _score(label, res, opts, max_refits, draws_per_chain, note)
+        scores = _score(label, res, opts, max_refits, draws_per_chain, note, shared)
         note(
             f"{label}: ELPD {scores.elpd:.1f} ± {scores.se:.1f} over {scores.n_periods} periods "
             f"({int(np.sum(scores.high_k))} with Pareto k > 0.7, {int(np.sum(scores.refitted))} "
             "refitted)"
         )
         failed = res.posterior.warnings if res.posterior is not None else ()
-        variants.append(Variant(label, study, scores, _settings(study), tuple(failed)))
+        variants.append(
+            Variant(label, study, scores, _settings(study), tuple(failed), scored_on=shared)
+        )
         if k - 1 in sources:
             variants.append(
                 _catalogue(
-                    sources[k - 1], variants[-1], res, opts, max_refits, draws_per_chain, note
+                    sources[k - 1],
+                    variants[-1],
+                    res,
+                    (opts, max_refits, draws_per_chain),
+                    note,
+                    shared,
                 )
             )
     first = contexts[0][1].measured
@@ -466,7 +551,7 @@ def compare(
             for v in variants
         ]
     )
-    notes = margins + _notes(variants, max_refits)
+    notes = on_notes + margins + _notes(variants, max_refits)
     pits = {v.label: v.scores.pit for v in variants}
     files = _write(folder, table, periods, notes, pits, loud)
     order = {label: k for k, label in enumerate(table["variant"])}
@@ -478,24 +563,35 @@ def _catalogue(
     label: str,
     source: Variant,
     res: Results,
-    options: Options,
-    max_refits: int,
-    draws_per_chain: int,
+    scoring: tuple[Options, int, int],
     say: Say,
+    outputs: tuple[str, ...],
 ) -> Variant:
-    """The catalogue row of ``source``'s error model, on its emulator."""
+    """The catalogue row of ``source``'s error model, on its emulator (``scoring``:
+    options, most refits, draws per chain)."""
     if res.emulator is None:  # pragma: no cover - run(until="calibrate") gives it
         raise ConfigError(f"{source.label}: the emulator stage did not finish")
     ctx, em = res.context, res.emulator
+    options, max_refits, draws_per_chain = scoring
     say(f"{label}: the nominal values with the error model of {source.label}")
-    scores, failed = cat.score_catalogue(label, ctx, em, options, max_refits, draws_per_chain, say)
+    scores, failed = cat.score_catalogue(
+        label, ctx, em, options, max_refits, draws_per_chain, say, outputs
+    )
     say(
         f"{label}: ELPD {scores.elpd:.1f} ± {scores.se:.1f} over {scores.n_periods} periods "
         f"({int(np.sum(scores.high_k))} with Pareto k > 0.7, {int(np.sum(scores.refitted))} "
         "refitted)"
     )
     settings = cat.catalogue_settings(ctx, em, source.settings)
-    return Variant(label, source.study, scores, settings, failed, catalogue_of=source.label)
+    return Variant(
+        label,
+        source.study,
+        scores,
+        settings,
+        failed,
+        catalogue_of=source.label,
+        scored_on=outputs,
+    )
 
 
 def _cost(

@@ -18,8 +18,9 @@ from typing import Any
 
 import numpy as np
 
-from bayescal.calibration.cv import PeriodScores, leave_period_out, refit_period
+from bayescal.calibration.cv import PeriodScores, leave_period_out, refit_period, scored_outputs
 from bayescal.calibration.posterior import Posterior
+from bayescal.errors import ConfigError
 from bayescal.mcmc.diagnostics import Diagnostics
 from bayescal.pipeline.keys import digest, stage_keys
 from bayescal.pipeline.stages import Context, EmulatorResult, Options
@@ -62,6 +63,7 @@ def score_calibration(
     file: str = crossval_store.FILE,
     what: tuple[str, ...] = (),
     held: np.ndarray | None = None,
+    outputs: tuple[str, ...] | None = None,
 ) -> PeriodScores:
     """The leave-one-period-out scores of a calibration of ``ctx`` (physical units).
 
@@ -83,17 +85,29 @@ def score_calibration(
     say
         One-line notes.
     file
-        The file in the study's output folder that keeps the scores.
+        The file in the study's output folder that keeps the scores (those of a
+        subset of the outputs beside it, ``STEM.on-HASH.npz``).
     what
         Added to the key (another model of the same study).
     held
         theta* on the normalised scale held fixed in the refits, as in the
         posterior (the catalogue model); ``None``: sampled.
+    outputs
+        The calibrated outputs scored (``None``: all; a subset is what variants that
+        calibrate different outputs share, :func:`~bayescal.calibration.cv.leave_period_out`).
     """
     obs = em.assembled.observations
     algebra = ctx.study.emulator.algebra
-    key = scores_key(ctx, em, draws_per_chain, *what)
+    try:
+        picked = scored_outputs(obs, outputs)
+    except ValueError as exc:
+        raise ConfigError(f"{label}: {exc}") from None
+    names = None if picked is None else tuple(obs.outputs[q].name for q in picked)
+    on = () if names is None else ("scored on", *names)
+    key = scores_key(ctx, em, draws_per_chain, *what, *on)
     path = ctx.out / file
+    if names is not None:  # beside the scores of every output, not over them
+        path = path.with_name(f"{path.stem}.on-{digest(*names)[:10]}{path.suffix}")
     scores = crossval_store.load_scores(path, key)
     if scores is None:
         post = posterior() if callable(posterior) else posterior
@@ -106,6 +120,7 @@ def score_calibration(
                 algebra=algebra,
                 draws_per_chain=draws_per_chain,
                 callback=tick,
+                outputs=names,
             )
         finally:
             close()
@@ -115,7 +130,7 @@ def score_calibration(
     todo = scores.refit_order()[: max(0, max_refits - int(np.sum(scores.refitted)))]
     cal = ctx.study.calibration
     priors = posterior.priors if isinstance(posterior, Posterior) else em.assembled.priors
-    seed_name = "-".join((*what, "leave-period-out"))
+    seed_name = "-".join((*what, "leave-period-out"))  # the same refit chains whatever is scored
     for i in todo:
         total = cal.chains * (cal.burn + cal.samples)
         tick, close = progress_bar(options, f"{label}: refit without period {i}", total)
@@ -135,16 +150,18 @@ def score_calibration(
                 callback=tick,
                 moves=cal.moves,
                 held=held,
+                outputs=names,
             )
         finally:
             close()
         scores = scores.with_refits({i: value}, _refit_note(i, refit.diagnostics), {i: pit})
         crossval_store.save_scores(scores, path, key)
-    return scores.shifted(relative_jacobian(ctx))
+    return scores.shifted(relative_jacobian(ctx, names))
 
 
-def relative_jacobian(ctx: Context) -> np.ndarray:
-    """Per training period ``(m*,)``: the log-Jacobian of the outputs with relative errors.
+def relative_jacobian(ctx: Context, outputs: tuple[str, ...] | None = None) -> np.ndarray:
+    """Per training period ``(m*,)``: the log-Jacobian of the outputs with relative errors
+    (among ``outputs``; ``None``: every calibrated output).
 
     Their scores are densities of ``log(y + floor)``; adding ``-sum log(y + floor)``
     over a period's samples makes them densities of the measurements in their own
@@ -153,6 +170,8 @@ def relative_jacobian(ctx: Context) -> np.ndarray:
     layout = ctx.measured.layout
     out = np.zeros(layout.m_star)
     for name, level in ctx.transforms.items():
+        if outputs is not None and name not in outputs:
+            continue
         train = layout.cut(np.asarray(ctx.measured.outputs[name], dtype=float))
         out += level.log_jacobian(train).sum(axis=0)
     return out

@@ -217,6 +217,7 @@ def comparison_markdown(
         "loo_band95": "left-out 95 % band",
         "loo_band50": "left-out 50 % band",
         "loo_band95_worst": "worst period, 95 % band",
+        "scored_on": "scored on",
         "diagnostics": "MCMC diagnostics",
         "parameters": "parameters",
         "priors": "priors",
