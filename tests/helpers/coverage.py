@@ -17,6 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from bayescal.calibration.modelerror import discrepancy_ratios
 from bayescal.calibration.posterior import Posterior, calibrate
 from bayescal.emulator.assemble import Assembled, NoiseSpec, assemble
 from bayescal.emulator.gp import Emulator
@@ -61,6 +62,10 @@ class CaseResult:
     noise_interval: tuple[float, float]  # that interval [W/m²]
     emulator95: dict[str, float]  # the same shares for the band of [predict] method = "emulator"
     emulator50: dict[str, float]
+    # the in-likelihood discrepancy's SD in noise SDs (2.5, 50, 97.5 %) and whether the
+    # first screen says the model misses part of the measurements (None: no discrepancy)
+    model_error: tuple[float, float, float] | None = None
+    model_error_shown: bool | None = None
 
 
 def windows(a: Assembled) -> dict[str, np.ndarray]:
@@ -194,9 +199,13 @@ def run_case(
         em95[window] = float(np.mean((y[mask] >= lo) & (y[mask] <= hi)))
         lo, hi = emulator.lower50["heat_flux_in"][mask], emulator.upper50["heat_flux_in"][mask]
         em50[window] = float(np.mean((y[mask] >= lo) & (y[mask] <= hi)))
+    sizes = discrepancy_ratios(em, post)
+    size = sizes[0] if sizes else None
     return CaseResult(
         truth, covered, _derived_covered(post, truth, true_wall), band95, band50, post, samples,
         bool(sd_lo <= noise_sd <= sd_hi), (float(sd_lo), float(sd_hi)), em95, em50,
+        None if size is None else tuple(np.quantile(size.ratio, [0.025, 0.5, 0.975])),
+        None if size is None else size.shown,
     )  # fmt: skip
 
 

@@ -202,15 +202,22 @@ def _first_screen(res: Results) -> list[str]:
     output: calibrated against nominal RMSE out of sample
     (:mod:`bayescal.report.trust`).
     """
+    from bayescal.calibration.modelerror import ModelErrorSize, discrepancy_ratios
     from bayescal.report.trust import catalogue_verdicts, held_out_outputs, trust_warnings
 
+    sizes: tuple[ModelErrorSize, ...] = ()
+    if res.posterior is not None and res.emulator is not None:
+        sizes = discrepancy_ratios(res.emulator.emulator, res.posterior)
     metrics = None
     held: tuple[str, ...] = ()
     if res.predictions is not None:
         metrics = res.predictions.metrics
         held = held_out_outputs(dict(res.predictions.dataset.attrs))
     disc = res.discrepancy.posterior if res.discrepancy is not None else None
-    lines = [f"WARNING: {w}" for w in trust_warnings(res.posterior, disc, metrics, held)]
+    lines = [f"WARNING: {w}" for w in trust_warnings(res.posterior, disc, metrics, held, sizes)]
+    if sizes:
+        lines += ["", "model error the data show (in-likelihood discrepancy):"]
+        lines += [f"  {size.line()}" for size in sizes]
     if metrics is not None:
         lines += ["", "out of sample, calibrated against nominal (catalogue) parameters:"]
         lines += [f"  {v.line()}" for v in catalogue_verdicts(metrics, held)]

@@ -18,6 +18,7 @@ import numpy as np
 import pandas as pd
 import xarray as xr
 
+from bayescal.calibration.modelerror import discrepancy_ratios
 from bayescal.calibration.posterior import Posterior
 from bayescal.config import Study
 from bayescal.design import Design
@@ -197,7 +198,8 @@ def write_study_report(
     """
     held = held_out_outputs(dict(predictions.attrs))
     disc = None if discrepancy is None else discrepancy.posterior
-    warnings = [*trust_warnings(posterior, disc, metrics, held), *posterior.warnings]
+    sizes = discrepancy_ratios(emulator, posterior)
+    warnings = [*trust_warnings(posterior, disc, metrics, held, sizes), *posterior.warnings]
     if failures:
         warnings.append(f"{len(failures)} simulator run(s) failed and were dropped")
     inputs = ReportInputs(

@@ -11,6 +11,9 @@ Two checks, each a pure function of results already computed:
   (:data:`NO_BETTER`). Worse is a warning: the parameters absorb model error.
 * :func:`bayescal.calibration.bounds.bound_leans` -- a parameter whose posterior
   piles against a bound of its prior.
+* :mod:`bayescal.calibration.modelerror` -- an in-likelihood discrepancy that
+  the data show for certain (its SD's 95 % interval above a quarter of the noise
+  SD): the model misses part of what was measured (:data:`MISSES`).
 
 :func:`trust_warnings` gathers both into the sentences shown before anything else.
 """
@@ -25,10 +28,12 @@ import numpy as np
 import pandas as pd
 
 from bayescal.calibration.bounds import bound_warnings
+from bayescal.calibration.modelerror import ModelErrorSize
 from bayescal.calibration.posterior import Posterior
 
 __all__ = [
     "ABSORBS",
+    "MISSES",
     "NO_BETTER",
     "CatalogueVerdict",
     "catalogue_verdicts",
@@ -40,6 +45,14 @@ __all__ = [
 NO_BETTER = 0.05
 #: What a calibrated prediction worse than the catalogue's means.
 ABSORBS = "the parameters absorb model error; treat them as fitting constants, not properties"
+
+#: What a discrepancy the data show for certain means for the parameters.
+MISSES = (
+    "the model misses part of what was measured; the parameters may have absorbed some of "
+    "it, and the physics behind the rest is in no parameter: quantities derived from them "
+    "(a U-value, a heat capacity) describe the model, not the building. Check them with a "
+    "sensor the calibration did not read, or a model with the missing physics"
+)
 
 Verdict = Literal["better", "no better", "worse", "unknown"]
 
@@ -160,6 +173,7 @@ def trust_warnings(
     discrepancy: Posterior | None = None,
     metrics: pd.DataFrame | None = None,
     held_out: Collection[str] = (),
+    model_error: Collection[ModelErrorSize] = (),
 ) -> tuple[str, ...]:
     """The warnings that say the calibration did not help, for the first screen.
 
@@ -175,6 +189,10 @@ def trust_warnings(
         worse than the nominal out of sample (:func:`catalogue_verdicts`).
     held_out
         The held-out outputs of ``metrics``.
+    model_error
+        The in-likelihood discrepancies' sizes
+        (:func:`bayescal.calibration.modelerror.discrepancy_ratios`): those the data
+        show for certain (:attr:`~bayescal.calibration.modelerror.ModelErrorSize.shown`).
     """
     found: list[str] = []
     for phase, post in (("calibration: ", posterior), ("difference process: ", discrepancy)):
@@ -184,4 +202,7 @@ def trust_warnings(
         for verdict in catalogue_verdicts(metrics, held_out):
             if (text := verdict.warning()) is not None:
                 found.append(text)
+    for size in model_error:
+        if size.shown:
+            found.append(f"{size.line()}: {MISSES}")
     return tuple(found)
