@@ -24,7 +24,15 @@ from bayescal.design import PosteriorPrior
 from bayescal.errors import BayescalError, ConfigError
 from bayescal.pipeline import Options, load_results, run, sequential
 from bayescal.pipeline.sequential import prior_from_draws, warm_starts
-from bayescal.pipeline.update import HISTORY_FILE, reuse_runs, runs_line, update, update_files
+from bayescal.pipeline import update as update_module
+from bayescal.pipeline.update import (
+    HISTORY_FILE,
+    reuse_runs,
+    runs_line,
+    update,
+    update_files,
+    write_history,
+)
 from sequential_study import END, write_study
 
 
@@ -44,7 +52,9 @@ def first(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return folder
 
 
-def test_update_adds_the_new_days_with_the_posterior_as_prior(first: Path, tmp_path: Path) -> None:
+def test_update_adds_the_new_days_with_the_posterior_as_prior(
+    first: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
     folder = tmp_path / "wall"
     shutil.copytree(first, folder)
     study = load_study(folder)
@@ -66,6 +76,19 @@ def test_update_adds_the_new_days_with_the_posterior_as_prior(first: Path, tmp_p
     assert pd.Timestamp(history["last_training"][1]) > pd.Timestamp(history["last_training"][0])
     width = history["k_cb_upper"] - history["k_cb_lower"]
     assert width[1] < width[0]  # more days and the previous posterior: narrower
+    # the rows come from each step's posterior-summary.csv; written again, the earlier
+    # step's row is taken from the file and only the newest step's is read
+    summary = pd.read_csv(folder / "out" / "posterior-summary.csv", index_col=0)
+    assert history["k_cb_mean"][0] == pytest.approx(summary.loc["k_cb", "mean"], rel=1e-12)
+    assert "lambda_mean" not in history.columns  # parameters and derived quantities only
+    read: list[str] = []
+    real = update_module._history_row
+    monkeypatch.setattr(
+        update_module, "_history_row", lambda s, label, *a: read.append(label) or real(s, label, *a)
+    )
+    write_history(study, 1)
+    assert read == ["1"]
+    pd.testing.assert_frame_equal(pd.read_csv(folder / "out" / HISTORY_FILE), history)
     # Bayes' rule: the update is the first posterior times the new days' likelihood,
     # which the same study without prior_from (uniform priors) shows alone. For these
     # near-Gaussian posteriors the product's mean and SD are the precision-weighted

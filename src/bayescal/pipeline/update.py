@@ -35,6 +35,8 @@ __all__ = [
 UPDATE_PATTERN = "update-{:03d}.toml"
 #: The history of the posterior over the updates, in the study's output folder.
 HISTORY_FILE = "update-history.csv"
+#: Summary rows that are not parameters or derived quantities (a name or its prefix).
+_NOT_QUANTITIES = ("lambda", "lambda_star", "phi", "delta_rel", "delta_ind", "noise_sd")
 
 
 @dataclass(frozen=True)
@@ -170,12 +172,24 @@ def _end(forcing: Any) -> float:
     return start + n * float(forcing.step)
 
 
-def _history_row(study: Study, label: str) -> dict[str, Any]:
+def _history_row(study: Study, label: str, measured: Any = None) -> dict[str, Any]:
+    """One row of the history: the step's training days and its parameters' and derived
+    quantities' means and 95 % intervals, read from the run's ``posterior-summary.csv``
+    (the posterior itself only where that file is missing). ``measured``: the step's
+    measured data where the caller holds them (else read again)."""
     from bayescal.data.measured import load_measured
 
     out = study.root / study.study.output_dir
-    post = posterior_store.load_posterior(out / posterior_store.FILE)
-    measured = load_measured(study)
+    summary = out / posterior_store.SUMMARY_FILE
+    posterior = out / posterior_store.FILE
+    if summary.is_file() and summary.stat().st_mtime_ns >= posterior.stat().st_mtime_ns:
+        table = pd.read_csv(summary, index_col=0)
+        names = [str(n) for n in table.index if n in study.parameters or _is_quantity(str(n))]
+    else:
+        post = posterior_store.load_posterior(posterior)
+        table = post.summary()
+        names = [*post.names, *post.derived]
+    measured = measured if measured is not None else load_measured(study)
     layout = measured.layout
     row: dict[str, Any] = {
         "update": label,
@@ -186,13 +200,77 @@ def _history_row(study: Study, label: str) -> dict[str, Any]:
         ),
         "training_periods": layout.m_star,
     }
-    table = post.summary()
-    names = [*post.names, *post.derived]
     for name in names:
         if name in table.index:
             for column in ("mean", "lower", "upper"):
                 row[f"{name}_{column}"] = float(np.asarray(table.loc[name, column], dtype=float))
     return row
+
+
+def _is_quantity(name: str) -> bool:
+    """Whether a summary row is a parameter or derived quantity (not a precision, an AR(1)
+    coefficient, a discrepancy variance or a noise SD)."""
+    return not any(name == p or name.startswith(f"{p}_") for p in _NOT_QUANTITIES)
+
+
+def _kept_at(path: Path) -> int:
+    """When ``path`` was written (ns; 0 where it is missing)."""
+    try:
+        return path.stat().st_mtime_ns
+    except OSError:
+        return 0
+
+
+def _kept_rows(path: Path, k: int) -> dict[str, dict[str, Any]]:
+    """The history rows of steps before ``k`` in ``path`` (empty where it cannot be read)."""
+    try:
+        table = pd.read_csv(path, dtype={"update": str})
+    except (OSError, ValueError):
+        return {}
+    out = {}
+    for _, row in table.iterrows():
+        label = str(row["update"])
+        if label.isdigit() and int(label) < k:
+            found = {
+                str(c): v for c, v in row.items() if not (isinstance(v, float) and np.isnan(v))
+            }
+            for column in ("first_training", "last_training"):
+                if column in found:
+                    found[column] = pd.Timestamp(found[column])
+            out[label] = found
+    return out
+
+
+def write_history(study: Study, k: int, measured: Any = None) -> tuple[pd.DataFrame, Path]:
+    """Write ``OUTPUT_DIR/update-history.csv`` of ``study`` after its update ``k``.
+
+    The rows of the steps before ``k`` are those the file already holds where their
+    posterior is not newer than it (an update never touches an earlier step); the
+    others are read from each step's ``posterior-summary.csv`` (:func:`_history_row`).
+    ``measured``: update ``k``'s measured data, where the caller holds them.
+    """
+    from bayescal.atomic import atomic_write_text
+
+    out = study.root / study.study.output_dir
+    path = out / HISTORY_FILE
+    kept, written_at = _kept_rows(path, k), _kept_at(path)
+
+    def row_of(step: Study, label: str) -> dict[str, Any]:
+        saved = kept.get(label)
+        posterior = step.root / step.study.output_dir / posterior_store.FILE
+        if saved is not None and posterior.stat().st_mtime_ns <= written_at:
+            return saved
+        return _history_row(step, label)
+
+    rows = [row_of(study, "0")]
+    for i, file in enumerate(update_files(study), start=1):
+        step = load_study(file)
+        if i == k:
+            rows.append(_history_row(step, str(i), measured))
+        elif _finished(step):
+            rows.append(row_of(step, str(i)))
+    history = pd.DataFrame(rows)
+    return history, atomic_write_text(path, history.to_csv(index=False))
 
 
 def update(
@@ -260,13 +338,7 @@ def update(
         "not to converge sooner: the burn-in adapts the proposal widths)"
     )
     tell(runs_line(previous, changed))
-    run_pipeline(changed, options=options, say=tell)
-    rows = [_history_row(study, "0")]
-    for i, file in enumerate(update_files(study), start=1):
-        step = load_study(file)
-        if _finished(step):
-            rows.append(_history_row(step, str(i)))
-    history = pd.DataFrame(rows)
-    out = study.root / study.study.output_dir
-    written = {"history": atomic_write_text(out / HISTORY_FILE, history.to_csv(index=False))}
+    results = run_pipeline(changed, options=options, say=tell)
+    history, file = write_history(study, k, results.context.measured)
+    written = {"history": file}
     return Update(changed, previous, history, written)
