@@ -23,8 +23,8 @@ from bayescal.config import load_study
 from bayescal.design import PosteriorPrior
 from bayescal.errors import BayescalError, ConfigError
 from bayescal.pipeline import Options, load_results, run, sequential
-from bayescal.pipeline.sequential import prior_from_draws, warm_starts
 from bayescal.pipeline import update as update_module
+from bayescal.pipeline.sequential import prior_from_draws, warm_starts
 from bayescal.pipeline.update import (
     HISTORY_FILE,
     reuse_runs,
