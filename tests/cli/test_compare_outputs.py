@@ -94,12 +94,26 @@ def test_scoring_on_an_output_one_variant_lacks_is_refused(folders: dict[str, Pa
         ["compare", str(folders["flux"]), str(folders["both"]), "--on", TEMP,
          "--output", str(folders["root"] / "refused"), "--no-catalogue", "--quiet"],
     )  # fmt: skip
-    assert result.exit_code != 0
+    assert result.exit_code != 0, result.output
     assert f"cannot score on {TEMP}: the outputs every variant calibrates are {FLUX}" in (
         result.output
     )
     assert "Traceback" not in result.output
     assert not (folders["root"] / "refused").exists()
+
+
+def test_the_printed_ranking_names_the_output_scored(
+    ranked: tuple[Comparison, list[str]], folders: dict[str, Path]
+) -> None:
+    result = CliRunner().invoke(
+        main,
+        ["compare", str(folders["flux"]), str(folders["both"]), "--on", FLUX, "--draws", "60",
+         "--max-refits", "1", "--output", str(folders["root"] / "printed"), "--no-catalogue",
+         "--quiet"],
+    )  # fmt: skip
+    assert result.exit_code == 0, result.output
+    assert f"(log density of the measurements of {FLUX} in their units" in result.output
+    assert f"scored on {FLUX} alone (both also {TEMP})" in result.output
 
 
 def test_variants_without_a_shared_output_are_refused(

@@ -512,9 +512,11 @@ def comparison_text(
         f"{'p_loo':>8}{'k>0.7':>7}{'refits':>7}{'band95':>14}{'band50':>14}  MCMC"
     )
     lines = [f"WARNING: {w}" for w in warnings]
+    scored = sorted(set(table["scored_on"])) if "scored_on" in table else []
+    on = f" of {', '.join(str(o) for o in scored)}" if len(scored) == 1 else ""
     lines += [
         f"leave-one-period-out ELPD over {int(table['periods'].iloc[0])} training periods "
-        "(log density of the measurements in their units, nats; higher is better):",
+        f"(log density of the measurements{on} in their units, nats; higher is better):",
         head,
     ]
     for _, r in table.iterrows():
