@@ -14,9 +14,7 @@ import numpy as np
 import pandas as pd
 
 from bayescal.simulators.base import Forcing
-from bayescal.simulators.fvm import Layer
-from bayescal.simulators.wall import MultilayerWall
-from virtual_wall import PER_DAY, STEP, virtual_experiment
+from virtual_wall import PER_DAY, STEP, paper_wall, virtual_experiment
 
 PHI = 0.9
 #: Training days, and one day each of warm-up and test window.
@@ -171,19 +169,7 @@ def two_sensor_data(seed: int = 3, days: int = DAYS, bias: float = 0.0) -> pd.Da
     reads off by a constant, which no parameter of the model can explain (model error
     the calibration may absorb into the parameters the flux also depends on)."""
     data = wall_data(seed, days, phi=0.0)
-    layers = [
-        Layer("board_out", 0.027, 0.0316, 116.6, 840.0),
-        Layer("concrete", 0.15, 0.12, 552.0, 800.0),
-        Layer("board_in", 0.027, 0.0316, 116.6, 840.0),
-    ]
-    targets = {
-        "k_cb": ["concrete.conductivity"],
-        "cp_cb": ["concrete.specific_heat"],
-        "cp_fb": ["board_out.specific_heat", "board_in.specific_heat"],
-    }
-    wall = MultilayerWall(
-        layers, parameters=targets, boundary="surface", outputs=("temp_interface_2",)
-    )
+    wall = paper_wall(outputs=("temp_interface_2",))  # the study's layers and parameters
     bc = {"temp_surf_out": data["T_se"].to_numpy(), "temp_surf_in": data["T_si"].to_numpy()}
     clean = wall.simulate(TRUTH, Forcing(STEP, bc))["temp_interface_2"]
     rng = np.random.default_rng([seed, 12])

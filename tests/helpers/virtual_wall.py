@@ -36,8 +36,9 @@ PRIORS = {
 PAPER_TRUTH = {"k_cb": 0.124, "cp_cb": 845.41, "cp_fb": 799.71}
 
 
-def paper_wall() -> MultilayerWall:
-    """The paper's wall with k_cb, cp_cb and cp_fb (both boards) as parameters."""
+def paper_wall(outputs: tuple[str, ...] = ("heat_flux_in",)) -> MultilayerWall:
+    """The paper's wall with k_cb, cp_cb and cp_fb (both boards) as parameters, giving
+    ``outputs``."""
     layers = [
         Layer("fb_out", 0.027, 0.0316, 116.6, 840.0),
         Layer("concrete", 0.150, 0.12, 552.0, 800.0),
@@ -48,7 +49,7 @@ def paper_wall() -> MultilayerWall:
         "cp_cb": ["concrete.specific_heat"],
         "cp_fb": ["fb_out.specific_heat", "fb_in.specific_heat"],
     }
-    return MultilayerWall(layers, parameters=targets, boundary="surface")
+    return MultilayerWall(layers, parameters=targets, boundary="surface", outputs=outputs)
 
 
 def plastered_wall() -> MultilayerWall:
