@@ -216,7 +216,7 @@ def _first_screen(res: Results) -> list[str]:
     disc = res.discrepancy.posterior if res.discrepancy is not None else None
     lines = [f"WARNING: {w}" for w in trust_warnings(res.posterior, disc, metrics, held, sizes)]
     if sizes:
-        lines += ["", "model error the data show (in-likelihood discrepancy):"]
+        lines += ["", "model error (in-likelihood discrepancy against the noise):"]
         lines += [f"  {size.line()}" for size in sizes]
     if metrics is not None:
         lines += ["", "out of sample, calibrated against nominal (catalogue) parameters:"]
