@@ -50,17 +50,17 @@ Usage::
 from __future__ import annotations
 
 import argparse
-import subprocess
 import sys
 import time
 from pathlib import Path
 
 import pandas as pd
 
-from bayescal.cli.progress import describe
+from bayescal.cli.progress import comparison_text, describe
 from bayescal.config import load_study
 from bayescal.errors import BayescalError
 from bayescal.pipeline import Options, Results, run
+from bayescal.pipeline.compare import compare
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO / "scripts"))
@@ -217,12 +217,17 @@ def main(argv: list[str] | None = None) -> int:
         print(metrics(res).to_string(index=False, float_format=lambda v: f"{v:.4g}"))
     calibrated = [f for f in folders if f.name != "flux-only"]
     if args.compare and len(calibrated) >= 2:
-        command = ["bayescal", "compare", *map(str, calibrated)]
-        command += ["--output", str(args.out / "compare")]
-        command += ["--max-refits", str(args.max_refits)]
-        print("\n" + " ".join(command))
-        exe = Path(sys.executable).with_name("bayescal")
-        return subprocess.call([str(exe) if exe.exists() else "bayescal", *command[1:]])
+        output = args.out / "compare"
+        print(
+            f"\nbayescal compare {' '.join(map(str, calibrated))} --output {output} "
+            f"--max-refits {args.max_refits}"
+        )
+        try:
+            result = compare(calibrated, output=output, max_refits=args.max_refits, say=print)
+        except BayescalError as exc:
+            print(f"error: {exc}", file=sys.stderr)
+            return 2
+        print(comparison_text(result.table, result.notes, result.files, result.warnings))
     return 0
 
 

@@ -35,8 +35,6 @@ __all__ = [
 UPDATE_PATTERN = "update-{:03d}.toml"
 #: The history of the posterior over the updates, in the study's output folder.
 HISTORY_FILE = "update-history.csv"
-#: Summary rows that are not parameters or derived quantities (a name or its prefix).
-_NOT_QUANTITIES = ("lambda", "lambda_star", "phi", "delta_rel", "delta_ind", "noise_sd")
 
 
 @dataclass(frozen=True)
@@ -184,7 +182,7 @@ def _history_row(study: Study, label: str, measured: Any = None) -> dict[str, An
     posterior = out / posterior_store.FILE
     if summary.is_file() and summary.stat().st_mtime_ns >= posterior.stat().st_mtime_ns:
         table = pd.read_csv(summary, index_col=0)
-        names = [str(n) for n in table.index if n in study.parameters or _is_quantity(str(n))]
+        names = list(posterior_store.posterior_quantities(posterior))
     else:
         post = posterior_store.load_posterior(posterior)
         table = post.summary()
@@ -205,12 +203,6 @@ def _history_row(study: Study, label: str, measured: Any = None) -> dict[str, An
             for column in ("mean", "lower", "upper"):
                 row[f"{name}_{column}"] = float(np.asarray(table.loc[name, column], dtype=float))
     return row
-
-
-def _is_quantity(name: str) -> bool:
-    """Whether a summary row is a parameter or derived quantity (not a precision, an AR(1)
-    coefficient, a discrepancy variance or a noise SD)."""
-    return not any(name == p or name.startswith(f"{p}_") for p in _NOT_QUANTITIES)
 
 
 def _kept_at(path: Path) -> int:

@@ -56,6 +56,7 @@ __all__ = [
     "load_posterior",
     "output_noise_from_json",
     "posterior_dataset",
+    "posterior_quantities",
     "posterior_summary",
     "save_posterior",
     "save_posterior_summary",
@@ -235,6 +236,21 @@ def load_posterior(path: str | os.PathLike[str]) -> Posterior:
         aux_names=aux_names,
         noise=noise,
     ).with_derived(derived)
+
+
+def posterior_quantities(path: str | os.PathLike[str]) -> tuple[str, ...]:
+    """The calibration parameters and derived quantities of a posterior file, in order,
+    from its metadata alone (no draws summarised, no diagnostics recomputed).
+
+    Raises
+    ------
+    bayescal.errors.DataError
+        If the file is missing or is not a posterior artefact.
+    """
+    extra = read_dataset(path, group="bayescal")
+    check_format(extra, POSTERIOR_FORMAT, path)
+    derived = json.loads(extra.attrs.get("derived", "{}"))
+    return (*json.loads(extra.attrs["names"]), *derived)
 
 
 def output_noise_from_json(spec: dict[str, Any]) -> OutputNoise:
