@@ -212,8 +212,7 @@ def load_posterior(path: str | os.PathLike[str]) -> Posterior:
     bayescal.errors.DataError
         If the file is missing or is not a posterior artefact.
     """
-    extra = read_dataset(path, group="bayescal")
-    check_format(extra, POSTERIOR_FORMAT, path)
+    extra = _metadata(path)
     post = read_dataset(path, group="posterior")
     stats = read_dataset(path, group="sample_stats")
     priors = {n: prior_from_spec(**spec) for n, spec in json.loads(extra.attrs["priors"]).items()}
@@ -247,10 +246,16 @@ def posterior_quantities(path: str | os.PathLike[str]) -> tuple[str, ...]:
     bayescal.errors.DataError
         If the file is missing or is not a posterior artefact.
     """
-    extra = read_dataset(path, group="bayescal")
-    check_format(extra, POSTERIOR_FORMAT, path)
+    extra = _metadata(path)
     derived = json.loads(extra.attrs.get("derived", "{}"))
     return (*json.loads(extra.attrs["names"]), *derived)
+
+
+def _metadata(path: str | os.PathLike[str]) -> xr.Dataset:
+    """The ``bayescal`` group of a posterior file, its format checked."""
+    extra = read_dataset(path, group="bayescal")
+    check_format(extra, POSTERIOR_FORMAT, path)
+    return extra
 
 
 def output_noise_from_json(spec: dict[str, Any]) -> OutputNoise:
