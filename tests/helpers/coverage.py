@@ -32,8 +32,10 @@ from bayescal.pipeline.simnoise import simulator_noise
 from bayescal.simulators.base import Simulator
 from bayescal.simulators.wall import MultilayerWall
 from bayescal.simulators.wrappers import IntervalMeans
+from nonlinear_wall import ConductivityWall
 from virtual_wall import (
     NOISE_VARIANCE,
+    PER_DAY,
     PRIORS,
     paper_wall,
     random_truth,
@@ -134,7 +136,7 @@ def run_case(
     *,
     error_model: ErrorModel = "white",
     noise_phi: float = 0.0,
-    true_wall: MultilayerWall | None = None,
+    true_wall: MultilayerWall | ConductivityWall | None = None,
     means: bool = False,
     described: bool = False,
     discrepancy: bool | str = False,
@@ -202,7 +204,8 @@ def run_case(
     sizes = discrepancy_ratios(em, post)
     size = sizes[0] if sizes else None
     return CaseResult(
-        truth, covered, _derived_covered(post, truth, true_wall), band95, band50, post, samples,
+        truth, covered, _derived_covered(post, _derived_truth(truth, true_wall, ve.boundary)),
+        band95, band50, post, samples,
         bool(sd_lo <= noise_sd <= sd_hi), (float(sd_lo), float(sd_hi)), em95, em50,
         None if size is None else tuple(np.quantile(size.ratio, [0.025, 0.5, 0.975])),
         None if size is None else size.shown,
@@ -229,15 +232,29 @@ def effective_noise_sd(a: Assembled, clean: np.ndarray, phi: float = 0.0) -> flo
     return float(np.sqrt(NOISE_VARIANCE + o.scale**2 * quad / dof))
 
 
-def _derived_covered(
-    post: Posterior, truth: dict[str, float], true_wall: MultilayerWall | None
-) -> dict[str, bool]:
+def _derived_truth(
+    truth: dict[str, float],
+    true_wall: MultilayerWall | ConductivityWall | None,
+    boundary: dict[str, np.ndarray],
+) -> dict[str, float]:
+    """R, U and areal heat capacity of the wall that made the measurements; a wall whose
+    conductivities depend on temperature gives its steady ones at the mean surface
+    temperatures of the training days (the test days left out)."""
+    if isinstance(true_wall, ConductivityWall):
+        n_train = next(iter(boundary.values())).size - TEST_DAYS * PER_DAY
+        t_out, t_in = (
+            float(np.mean(boundary[k][:n_train])) for k in ("temp_surf_out", "temp_surf_in")
+        )
+        return true_wall.derived_at(truth, t_out, t_in)
+    return (true_wall or paper_wall()).derived(truth)
+
+
+def _derived_covered(post: Posterior, actual: dict[str, float]) -> dict[str, bool]:
     """Whether the 95 % intervals of the calibrated wall's R, U and heat capacity
-    cover those of the wall that made the measurements."""
+    cover those of the wall that made the measurements (``actual``)."""
     wall = paper_wall()
     flat = post.draws.reshape(-1, len(post.names))
     rows = [wall.derived(dict(zip(post.names, map(float, r), strict=True))) for r in flat]
-    actual = (true_wall or wall).derived(truth)
     out = {}
     for name, value in actual.items():
         column = np.array([r[name] for r in rows])

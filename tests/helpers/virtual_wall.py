@@ -168,7 +168,7 @@ def virtual_experiment(
     test_days: int = 2,
     noise_variance: float = NOISE_VARIANCE,
     noise_phi: float = 0.0,
-    true_wall: MultilayerWall | None = None,
+    true_wall: Simulator | None = None,
     means: bool = False,
     logger_substeps: int = 6,
     model: Simulator | None = None,

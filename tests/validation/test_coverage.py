@@ -34,7 +34,8 @@ it takes 48 correlated samples a day for 48 independent ones); and a model-form
 error of the observation: the "logger" records half-hour means while the model
 gives instantaneous values; a wall with a 15 mm plaster layer the model lacks,
 calibrated with a discrepancy in the likelihood (its band conditioned on the
-training residuals). In the interval-means experiment the parameters the missing physics does not
+training residuals); and a wall whose conductivities rise with temperature
+(``helpers/nonlinear_wall.py``), the model's constant, with the same discrepancy. In the interval-means experiment the parameters the missing physics does not
 alias into (k_cb, cp_fb), the wall's thermal resistance, and the bands keep
 their rates; the concrete's heat capacity does not: a half-hour mean lags the
 instantaneous flux by about 15 minutes, which the model can only reproduce with
@@ -58,6 +59,7 @@ import pytest
 from scipy import stats
 
 from coverage import CaseResult, run_case
+from nonlinear_wall import REALISTIC, ConductivityWall
 from virtual_wall import NOISE_VARIANCE, plastered_wall
 
 N_TRUTHS = int(os.environ.get("BAYESCAL_VALIDATION_TRUTHS", "2"))
@@ -70,6 +72,11 @@ EXPERIMENTS = {
     "white-discrepancy": {"error_model": "white", "discrepancy": True},
     "plaster": {"error_model": "white", "true_wall": plastered_wall(), "discrepancy": True},
     "plaster-both": {"error_model": "white", "true_wall": plastered_wall(), "discrepancy": "both"},
+    "conductivity": {
+        "error_model": "white",
+        "true_wall": ConductivityWall(REALISTIC),
+        "discrepancy": True,
+    },
 }
 
 pytestmark = pytest.mark.slow
@@ -88,6 +95,7 @@ def results(name: str) -> tuple[CaseResult, ...]:
                 row |= {"band95": c.band95, "band50": c.band50, "samples": c.samples}
                 row |= {"emulator95": c.emulator95, "emulator50": c.emulator50}
                 row |= {"model_error": c.model_error, "model_error_shown": c.model_error_shown}
+                row |= {"truth": c.truth}
                 f.write(json.dumps(row) + "\n")
     return cases
 
@@ -225,3 +233,21 @@ def test_a_discrepancy_on_a_correct_model_keeps_the_rates_and_raises_no_alarm() 
     _bands_hold(cases, route="emulator")
     alarms = [c.model_error for c in cases if c.model_error_shown]
     assert len(alarms) <= len(cases) // 10, alarms
+
+
+def test_a_conductivity_that_rises_with_temperature_is_covered_or_flagged() -> None:
+    # Every layer's conductivity rises with temperature by coefficients of the size EN ISO
+    # 10456 tabulates (0.5 %/K in the glass-fibre boards, 0.2 %/K in the aerated
+    # concrete); the model keeps them constant. At each truth the wall's R (steady, at
+    # the training days' mean surface temperatures), U and areal heat capacity are
+    # covered, or the first screen says the model misses part of the measurements: at 8
+    # of 10 truths or more (issue 35; with fewer truths, a quick check, the binomial
+    # floor). Measured at ten: R and U covered 9, the heat capacity 7, the warning shown
+    # at 9, so covered or warned 10, 10 and 9.
+    cases = results("conductivity")
+    need = binomial_floor(len(cases)) if len(cases) < 10 else math.ceil(0.8 * len(cases))
+    for quantity in ("R_wall", "U_value", "areal_heat_capacity"):
+        ok = [c.derived_covered[quantity] or bool(c.model_error_shown) for c in cases]
+        assert sum(ok) >= need, (quantity, [(c.derived_covered, c.model_error) for c in cases])
+    _bands_hold(cases)
+    _bands_hold(cases, route="emulator")
