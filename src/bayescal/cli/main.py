@@ -653,6 +653,16 @@ def report(study: Path) -> None:
     "calibrated by every study. Default: the outputs every study calibrates, so that "
     "variants calibrating different outputs are ranked on those they share.",
 )
+@click.option(
+    "--held-out/--no-held-out",
+    default=True,
+    show_default=True,
+    help="Also score the held-out sensors ([outputs] held_out) that every study holds "
+    "out, on the training periods: each study's simulator at [predict] runs posterior "
+    "draws (from the run cache where its predict stage has run) and the catalogue's "
+    "nominal run, with the sensors' stated accuracy; a WARNING line says when the "
+    "catalogue values predict one as well as the calibration.",
+)
 @simulation_options
 @click.option("--quiet", "-q", is_flag=True, help="No progress bars or notes; the table only.")
 @user_errors
@@ -663,6 +673,7 @@ def compare(
     draws: int,
     catalogue: bool,
     on: tuple[str, ...],
+    held_out: bool,
     jobs: int | None,
     backend: str | None,
     scheduler: str | None,
@@ -706,8 +717,17 @@ def compare(
     WARNING line says that calibration does not improve on the catalogue values
     on the left-out periods: the parameters absorb model error.
 
+    Held-out sensors that every study holds out ([outputs] held_out) are
+    scored too, unless --no-held-out: on the training periods, by the log
+    density of their samples under each study's simulator at posterior draws
+    (the catalogue's nominal run) with the sensor's stated accuracy, the RMSE
+    and the share inside the 95 % and 50 % bands. A WARNING line says where the
+    catalogue values predict a held-out sensor as well as the best calibrated
+    study or better: the parameters absorb model error.
+
     Writes compare.csv (the ranking), compare-periods.csv (every period of
-    every variant), compare.png and compare.md into --output; each study keeps
+    every variant), compare-held-out.csv (where sensors are held out),
+    compare.png and compare.md into --output; each study keeps
     its scores in OUTPUT_DIR/leave-period-out.npz for the next comparison.
     """
     from bayescal.cli.progress import comparison_text, progress_options
@@ -724,5 +744,8 @@ def compare(
         say=(lambda _: None) if quiet else click.echo,
         catalogue=catalogue,
         on=on,
+        held_out=held_out,
     )
-    click.echo(comparison_text(result.table, result.notes, result.files, result.warnings))
+    click.echo(
+        comparison_text(result.table, result.notes, result.files, result.warnings, result.held_out)
+    )

@@ -494,10 +494,14 @@ def _band(row: Any, column: str) -> str:
 
 
 def comparison_text(
-    table: Any, notes: Sequence[str], files: Mapping[str, Any], warnings: Sequence[str] = ()
+    table: Any,
+    notes: Sequence[str],
+    files: Mapping[str, Any],
+    warnings: Sequence[str] = (),
+    held_out: Any = None,
 ) -> str:
-    """The ranking of ``bayescal compare``: loud warnings, table, verdicts, notes and the
-    files written."""
+    """The ranking of ``bayescal compare``: loud warnings, table, verdicts, the held-out
+    sensors' scores, notes and the files written."""
     from bayescal.report.compare import (
         SMALL_DIFFERENCE,
         diagnostics_mark,
@@ -540,6 +544,8 @@ def comparison_text(
         "a check; MCMC: the calibration's R-hat and ESS checks, FAILED: its rank is not "
         "reliable; the test window was not read)"
     )
+    if held_out is not None and len(held_out):
+        lines += ["", *_held_out_lines(held_out, width)]
     lines += [f"note: {n}" for n in notes]
     lines += [f"wrote {path}" for path in files.values()]
     return "\n".join(lines)
@@ -581,3 +587,34 @@ def screening_text(indices: Sequence[MorrisIndices | SobolIndices], proposal: Pr
         f"output{cap}): " + (", ".join(proposal.selected) or "none")
     )
     return "\n".join(lines)
+
+
+_MCMC_MARK = {"failed": "FAILED !", "none": "-"}
+
+
+def _held_out_lines(held_out: Any, width: int) -> list[str]:
+    """The held-out sensors' scores of ``bayescal compare``, one block per sensor."""
+    lines = []
+    for name, rows in held_out.groupby("output", sort=False):
+        lines.append(
+            f"held-out sensor {name} (never calibrated on; training periods, stated SD "
+            f"{rows['sd'].iloc[0]:.3g}; log density in nats, higher is better):"
+        )
+        lines.append(
+            f"{'rank':>4}  {'variant':<{width}}{'log dens.':>11}{'SE':>8}{'diff':>10}"
+            f"{'SE diff':>9}{'RMSE':>10}{'band95':>14}{'band50':>14}  MCMC"
+        )
+        for _, r in rows.iterrows():
+            b95 = f"{r['band95']:.3f}±{r['band95_se']:.3f}"
+            b50 = f"{r['band50']:.3f}±{r['band50_se']:.3f}"
+            lines.append(
+                f"{int(r['rank']):>4}  {r['variant']!s:<{width}}{r['lpd']:>11.1f}{r['se']:>8.1f}"
+                f"{r['lpd_diff']:>10.1f}{r['se_diff']:>9.1f}{r['rmse']:>10.3g}{b95:>14}{b50:>14}"
+                f"  {_MCMC_MARK.get(r['diagnostics'], 'ok')}"
+            )
+    lines.append(
+        "(each variant's simulator at posterior draws, the catalogue's nominal run, with "
+        "the sensor's stated accuracy; a calibration that predicts a sensor it never saw "
+        "worse than the catalogue values has put model error into its parameters)"
+    )
+    return lines

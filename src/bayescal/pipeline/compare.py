@@ -28,7 +28,12 @@ discrepancy on or off, another standardisation). :func:`compare`
    every table, never ranked silently), and writes into ``output``:
    ``compare.csv`` (the ranking), ``compare-periods.csv`` (every period of
    every variant), ``compare.png`` (:func:`bayescal.report.compare.plot_comparison`)
-   and ``compare.md`` (a summary page).
+   and ``compare.md`` (a summary page);
+5. with ``held_out`` (the default), scores the held-out sensors every variant holds
+   out (:mod:`bayescal.pipeline.heldscore`: each variant's simulator at posterior
+   draws and the catalogue model's nominal run, with the sensors' stated accuracy,
+   on the training periods) into ``compare-held-out.csv`` and the page, and says
+   loudly where the catalogue values predict one as well as the calibration.
 
 With ``catalogue`` (the default) the *catalogue model* is ranked beside them
 (:mod:`bayescal.pipeline.catalogue`): every calibrated parameter at its nominal
@@ -60,6 +65,7 @@ from bayescal.config import Study, load_study
 from bayescal.config.outputs import OutputError
 from bayescal.errors import BayescalError, ConfigError
 from bayescal.pipeline import catalogue as cat
+from bayescal.pipeline import heldscore as ho
 from bayescal.pipeline.budget import estimate_time, format_seconds
 from bayescal.pipeline.run import Results, run
 from bayescal.pipeline.scores import relative_jacobian, score_calibration
@@ -86,6 +92,7 @@ FILES = {
     "periods": "compare-periods.csv",
     "figure": "compare.png",
     "summary": "compare.md",
+    "held_out": "compare-held-out.csv",
 }
 
 
@@ -140,6 +147,7 @@ class Comparison:
     notes: tuple[str, ...]
     files: dict[str, Path]
     warnings: tuple[str, ...] = ()
+    held_out: pd.DataFrame = field(default_factory=pd.DataFrame)
 
 
 def _labels(studies: Sequence[Study]) -> list[str]:
@@ -446,6 +454,7 @@ def compare(
     say: Say | None = None,
     catalogue: bool = True,
     on: Sequence[str] = (),
+    held_out: bool = True,
 ) -> Comparison:
     """Rank the variants ``paths`` by leave-one-period-out ELPD and write the comparison.
 
@@ -477,6 +486,10 @@ def compare(
         Score only these calibrated outputs (each calibrated by every variant);
         empty: the outputs every variant calibrates (:func:`scored_on`).
         Variants that calibrate different outputs are compared on those they share.
+    held_out
+        Also score the held-out sensors every variant holds out, on the training
+        periods (:mod:`bayescal.pipeline.heldscore`; ``[predict] runs`` simulator runs
+        at posterior draws per variant, through the run cache).
 
     Raises
     ------
@@ -511,13 +524,23 @@ def compare(
     shared, on_notes = scored_on(labels, studies, on)
     for other in contexts[1:]:
         same_training_data(contexts[0], other, shared)
+    sensors, held_notes = ho.shared_held_out(labels, studies) if held_out else ((), [])
+    ho.same_held_out_data(contexts, sensors)
+    on_notes += held_notes
     for line in on_notes:
         note(line)
     sources = cat.catalogue_labels(labels, [_settings(s)["error_model"] for s in studies])
     if not catalogue:
         sources = {}
     note(_cost(contexts, max_refits, sources))
+    if sensors:
+        note(
+            f"held-out sensors {', '.join(sensors)}: the simulator at up to "
+            f"{max(c.study.predict.runs for _, c in contexts)} posterior draws per variant "
+            "(from the run cache where the predict stage has run) and the nominal run"
+        )
     variants = []
+    held: list[tuple[str, str, bool, dict[str, ho.HeldOutScore]]] = []
     for k, (label, study) in enumerate(zip(labels, studies, strict=True), start=1):
         note(f"variant {k} of {len(studies)}: {label}")
         res = _calibrated(label, study, opts, note)
@@ -531,6 +554,19 @@ def compare(
         variants.append(
             Variant(label, study, scores, _settings(study), tuple(failed), scored_on=shared)
         )
+        if sensors and res.posterior is not None:
+            note(f"{label}: predicting the held-out sensors at posterior draws")
+            scored = ho.variant_held_out(res.context, res.posterior, sensors)
+            held.append((label, "calibrated", bool(failed), scored))
+            if k - 1 in sources and not any(m == "catalogue" for _, m, _, _ in held):
+                held.append(
+                    (
+                        sources[k - 1],
+                        "catalogue",
+                        False,
+                        ho.catalogue_held_out(res.context, sensors),
+                    )
+                )
         if k - 1 in sources:
             variants.append(
                 _catalogue(
@@ -552,11 +588,13 @@ def compare(
         ]
     )
     notes = on_notes + margins + _notes(variants, max_refits)
+    loud += ho.held_out_warnings(held)
+    held_table = ho.held_out_table(held)
     pits = {v.label: v.scores.pit for v in variants}
-    files = _write(folder, table, periods, notes, pits, loud)
+    files = _write(folder, table, periods, notes, pits, loud, held_table)
     order = {label: k for k, label in enumerate(table["variant"])}
     ranked = tuple(sorted(variants, key=lambda v: order[v.label]))
-    return Comparison(ranked, table, periods, tuple(notes), files, tuple(loud))
+    return Comparison(ranked, table, periods, tuple(notes), files, tuple(loud), held_table)
 
 
 def _catalogue(
@@ -636,6 +674,7 @@ def _write(
     notes: list[str],
     pits: dict[str, np.ndarray],
     warnings: list[str] | None = None,
+    held_out: pd.DataFrame | None = None,
 ) -> dict[str, Path]:
     try:
         folder.mkdir(parents=True, exist_ok=True)
@@ -644,7 +683,10 @@ def _write(
             "periods": atomic_write_text(folder / FILES["periods"], periods.to_csv(index=False)),
             "figure": plot_comparison(folder / FILES["figure"], table, periods, pits),
         }
-        text = comparison_markdown(table, periods, notes, FILES["figure"], warnings or [])
+        if held_out is not None and len(held_out):
+            path = folder / FILES["held_out"]
+            files["held_out"] = atomic_write_text(path, held_out.to_csv(index=False))
+        text = comparison_markdown(table, periods, notes, FILES["figure"], warnings or [], held_out)
         files["summary"] = atomic_write_text(folder / FILES["summary"], text)
     except OSError as exc:
         raise ConfigError(f"cannot write into {folder}: {exc.strerror or exc}") from None

@@ -200,9 +200,10 @@ def comparison_markdown(
     notes: list[str],
     figure: str | None,
     warnings: list[str] | None = None,
+    held_out: pd.DataFrame | None = None,
 ) -> str:
-    """A short Markdown page: the loud warnings, the ranking table, verdicts, notes and
-    the figure."""
+    """A short Markdown page: the loud warnings, the ranking table, verdicts, the
+    held-out sensors' table (:mod:`bayescal.pipeline.heldscore`), notes and the figure."""
     columns = {
         "rank": "rank",
         "variant": "variant",
@@ -269,8 +270,44 @@ def comparison_markdown(
     ]
     if "model" in table.columns and (table["model"] == "catalogue").any():
         lines += ["", CATALOGUE_TEXT]
+    if held_out is not None and len(held_out):
+        lines += ["", *held_out_markdown(held_out)]
     if notes:
         lines += ["", "## Notes", ""] + [f"- {n}" for n in notes]
     if figure:
         lines += ["", f"![ELPD per variant and per period]({figure})"]
     return "\n".join(lines) + "\n"
+
+
+#: What the held-out sensors' scores are, for the page and the terminal.
+HELD_OUT_TEXT = (
+    "Held-out sensors are never calibrated on: each variant predicts them by its "
+    "simulator at posterior draws (the catalogue model by its nominal run) with the "
+    "sensor's stated accuracy ([outputs.errors.NAME] sd), scored on the training periods "
+    "by the log density of their samples (nats, higher is better; diff and SE paired "
+    "by period), the RMSE of the mean prediction and the share of the samples inside the "
+    "central 95 % and 50 % of the prediction (± SE over the periods). A calibration that "
+    "predicts a sensor it never saw worse than the catalogue values has put model error "
+    "into its parameters."
+)
+
+
+def held_out_markdown(held_out: pd.DataFrame) -> list[str]:
+    """The held-out sensors' section of the comparison page."""
+    lines = ["## Held-out sensors", "", HELD_OUT_TEXT, ""]
+    lines += [
+        "| sensor | rank | variant | model | log density | SE | diff | SE diff | RMSE | "
+        "95 % band | 50 % band | draws | stated SD |",
+        "|" + "|".join("---" for _ in range(13)) + "|",
+    ]
+    for _, r in held_out.iterrows():
+        variant = str(r["variant"]).replace("|", "\\|")
+        if r["diagnostics"] == "failed":
+            variant = f"**{variant}** ⚠"
+        lines.append(
+            f"| {r['output']} | {int(r['rank'])} | {variant} | {r['model']} | {r['lpd']:.1f} | "
+            f"{r['se']:.1f} | {r['lpd_diff']:.1f} | {r['se_diff']:.1f} | {r['rmse']:.3g} | "
+            f"{r['band95']:.3f} ± {r['band95_se']:.3f} | {r['band50']:.3f} ± "
+            f"{r['band50_se']:.3f} | {int(r['draws'])} | {r['sd']:.3g} |"
+        )
+    return lines
