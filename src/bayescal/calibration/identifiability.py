@@ -151,7 +151,7 @@ def moves_hint(posterior: Posterior) -> str | None:
     draws = posterior.all_draws().reshape(-1, len(posterior.all_names))
     positive = np.all(draws > 0.0, axis=0)
     z = np.where(positive, np.log(np.where(positive, draws, 1.0)), draws)
-    moving = np.std(z, axis=0) > 0.0
+    moving = np.ptp(z, axis=0) > 0.0  # a held coordinate is constant (std may round above 0)
     if np.count_nonzero(moving) < 2:
         return None
     names = [n for n, m in zip(posterior.all_names, moving, strict=True) if m]
