@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 import pytest
 
+from bayescal.calibration.identifiability import identifiability
 from bayescal.config import load_study
 from bayescal.errors import ConfigError
 from bayescal.pipeline import Options, run
@@ -154,6 +155,11 @@ def test_the_calibration_holds_them_at_nominal_and_covers_the_truth(
         assert np.std(draws[:, k]) > 0.0
     # the interval is narrower than the prior: the data, not the prior, place it
     assert np.ptp(np.quantile(draws[:, 0], [0.025, 0.975])) < 0.2 * (0.16 - 0.08)
+    # what the data fix is said of the calibrated parameters only (the held are not fixed
+    # by the data, nor correlated with anything)
+    ident = identifiability(post)
+    assert ident.names == ("k_cb", "cp_cb")
+    assert ident.correlation.shape == (2, 2)
 
 
 def test_without_a_screening_it_says_to_screen_first(tmp_path: Path) -> None:
