@@ -545,18 +545,24 @@ def hold_theta(
 
     ``indices``: the theta* coordinates held, one per entry of ``u`` (default:
     the first ``len(u)``, every theta* coordinate where ``u`` has ``t``
-    entries). The chains then sample the other coordinates of the same target
-    (with every theta* held: only ``lambda``, the ``lambda*``, the ``phi`` and
-    the discrepancy's ``r``): a held coordinate keeps its start value (the
-    sampler's ``fixed`` coordinates, whose acceptance is NaN, so the
-    diagnostics pass over them), leaves the joint block and its sampling map
-    becomes the identity (a value on a prior bound stays a valid start). The
-    catalogue model of ``bayescal compare`` is this target at the nominal values
-    (:mod:`bayescal.pipeline.catalogue`); ``[design] reuse_screening`` holds the
-    screened-out inputs of the emulator at theirs (:mod:`bayescal.pipeline.reuse`).
+    entries, except those where ``u`` is NaN). The chains then sample the
+    other coordinates of the same target (with every theta* held: only
+    ``lambda``, the ``lambda*``, the ``phi`` and the discrepancy's ``r``): a
+    held coordinate keeps its start value (the sampler's ``fixed``
+    coordinates, whose acceptance is NaN, so the diagnostics pass over them),
+    leaves the joint block and its sampling map becomes the identity (a value
+    on a prior bound stays a valid start). The catalogue model of ``bayescal
+    compare`` is this target at the nominal values
+    (:mod:`bayescal.pipeline.catalogue`); ``[design] reuse_screening`` holds
+    the screened-out inputs of the emulator at theirs
+    (:mod:`bayescal.pipeline.reuse`).
     """
     held = np.asarray(u, dtype=float).reshape(-1)
-    at = list(range(held.size)) if indices is None else [int(i) for i in indices]
+    if indices is None:  # NaN entries: coordinates sampled, not held
+        at = np.flatnonzero(~np.isnan(held)).tolist()
+        held = held[at]
+    else:
+        at = [int(i) for i in indices]
     if len(at) != held.size:
         raise ValueError(f"{held.size} held values for {len(at)} coordinates")
     if not np.all((held >= 0.0) & (held <= 1.0)):
