@@ -90,8 +90,10 @@ class DesignSection(Section):
         "emulator's parameter inputs are then every parameter the screening varied, and the "
         "calibration and predictions hold the screened-out ones at their nominal values "
         "(they are not calibrated); the screening runs come from the run cache, not the "
-        "simulator. Off by default: it changes the emulator's inputs and needs the "
-        "screening's results in the output folder.",
+        "simulator. Not with a Morris screening, sequential = true, sampler 'nuts', "
+        "[discrepancy] enabled or [study] prior_from. Off by default: it changes the "
+        "emulator's inputs (more of them, a longer training) and needs the screening's "
+        "results in the output folder.",
         True,
         default=False,
     )
