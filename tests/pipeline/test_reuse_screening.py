@@ -207,3 +207,18 @@ def test_off_by_default_keeps_the_design(tmp_path: Path) -> None:
     study = load_study(_study(tmp_path / "wall", design="", screening=SOBOL))
     assert not study.design.reuse_screening
     assert "reuse_screening" not in study.design.key_dump()
+
+
+def test_a_morris_screening_in_the_folder_is_refused(tmp_path: Path) -> None:
+    folder = _study(tmp_path / "wall", design="", screening="\n[screening]\ntrajectories = 3\n")
+    screen(load_study(folder), options=SERIAL)  # Morris, into the same output folder
+    path = folder / "study.toml"
+    text = (
+        path.read_text(encoding="utf-8")
+        .replace("\n[screening]\ntrajectories = 3\n", SOBOL)
+        .replace(f"runs = {NEW_RUNS}\n", f"runs = {NEW_RUNS}\nreuse_screening = true\n", 1)
+    )
+    path.write_text(text, encoding="utf-8")
+    with pytest.raises(ConfigError, match=r"is a morris screening, whose runs cannot join") as info:
+        run(load_study(folder), until="design", options=SERIAL)
+    assert "method = 'sobol'" in info.value.one_line()
