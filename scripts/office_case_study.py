@@ -21,6 +21,11 @@ Usage::
     OPENBLAS_NUM_THREADS=1 python scripts/office_case_study.py [--fresh] [--jobs N]
         [--backend processes|dask] [--scheduler ADDRESS] [--out DIR] [--markdown]
 
+``--few-runs`` switches to issue 36's settings (Sobol screening on 42 runs, fewer
+design runs); with ``--reuse`` the screening's runs join the design (``[design]
+reuse_screening = true``) and, without ``--design-runs``, the new runs are set from the
+screening: 10 per calibrated parameter in all, the screening's counted.
+
 Running it again reuses the cached EnergyPlus runs and every finished stage;
 ``--fresh`` starts from an empty folder.
 """
@@ -99,9 +104,12 @@ def guideline14(study_dir: Path) -> pd.DataFrame:
     return frame.set_index("output")
 
 
-def _few_runs(path: Path, max_parameters: int = 8, design_runs: int | None = None) -> None:
+def _few_runs(
+    path: Path, max_parameters: int = 8, design_runs: int | None = None, reuse: bool = False
+) -> None:
     """Switch a fresh copy of the office study to the settings of ``--few-runs``
-    (``design_runs``: a one-shot design of that many runs instead of the sequential one)."""
+    (``design_runs``: a one-shot design of that many runs instead of the sequential one;
+    ``reuse``: a one-shot design after the screening's runs, ``[design] reuse_screening``)."""
     data = tomllib.loads(path.read_text(encoding="utf-8"))
     data["screening"] = {
         "method": "sobol",
@@ -112,11 +120,25 @@ def _few_runs(path: Path, max_parameters: int = 8, design_runs: int | None = Non
     }
     data["design"] = (
         {"runs": 24, "sequential": True, "batch": 12, "max_runs": 72}
-        if design_runs is None
-        else {"runs": design_runs}
+        if design_runs is None and not reuse
+        else {"runs": design_runs or 2 + max_parameters}
     )
+    if reuse:
+        data["design"]["reuse_screening"] = True
     data["predict"] = {**data["predict"], "method": "auto"}
     path.write_text(tomli_w.dumps(data), encoding="utf-8")
+
+
+def _reuse_runs(path: Path, screening_runs: int) -> None:
+    """Set ``[design] runs`` from the screening: 10 runs per calibrated parameter in all
+    (Loeppky et al. 2009's rule for a GP emulator), the screening's hypercube counted
+    (it spans the calibrated parameters' ranges too)."""
+    t = len(load_study(path.parent).calibrated)
+    runs = max(t + 2, 10 * t - screening_runs)
+    data = tomllib.loads(path.read_text(encoding="utf-8"))
+    data["design"]["runs"] = runs
+    path.write_text(tomli_w.dumps(data), encoding="utf-8")
+    print(f"design: {runs} new runs = 10 x {t} calibrated parameters - {screening_runs} reused")
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -147,6 +169,13 @@ def main(argv: list[str] | None = None) -> int:
         help="--few-runs: a one-shot Latin hypercube of this many runs instead of the "
         "sequential design",
     )
+    parser.add_argument(
+        "--reuse",
+        action="store_true",
+        help="--few-runs: [design] reuse_screening = true, a one-shot design after the "
+        "screening's runs; without --design-runs its new runs are 10 x the calibrated "
+        "parameters minus the screening's runs (at least parameters + 2)",
+    )
     args = parser.parse_args(argv)
     folder: Path = args.out
     if args.fresh and folder.exists():
@@ -154,12 +183,14 @@ def main(argv: list[str] | None = None) -> int:
     if not (folder / "study.toml").is_file():
         copy_example("office", folder)
         if args.few_runs:
-            _few_runs(folder / "study.toml", args.max_parameters, args.design_runs)
+            _few_runs(folder / "study.toml", args.max_parameters, args.design_runs, args.reuse)
     options = Options(backend=args.backend, jobs=args.jobs, scheduler=args.scheduler)
     start = time.perf_counter()
     screened = screen(load_study(folder), options=options, apply=True, say=print)
     print(screening_text(screened.indices, screened.proposal))
     print(f"screening: {screened.seconds:.1f} s ({screened.runs.n_run} EnergyPlus runs)")
+    if args.few_runs and args.reuse and args.design_runs is None:
+        _reuse_runs(folder / "study.toml", screened.design.runs)
     res = run(load_study(folder), until="report", options=options, say=print)
     total = time.perf_counter() - start
     stages = json.loads((res.context.out / "stages.json").read_text(encoding="utf-8"))

@@ -64,3 +64,29 @@ def test_hold_theta_frees_only_the_error_model(small_wall: Wall) -> None:
         calibrate(em, a, held={a.parameter_names[0]: 0.1})
     with pytest.raises(ConfigError, match="sampler 'mwg' only"):
         calibrate(em, a, held=dict.fromkeys(a.parameter_names, 0.1), sampler="nuts")
+
+
+def test_some_parameters_held_the_others_sampled(small_wall: Wall) -> None:
+    """``fixed`` (``[design] reuse_screening``'s screened-out inputs): one coordinate held,
+    the other sampled; a NaN in ``hold_theta``'s values leaves its coordinate free."""
+    _, a, em = small_wall
+    names = a.parameter_names
+    keep = names[1]
+    value = float(a.priors[keep].from_unit(0.4))
+    post = calibrate(
+        em, a, n_chains=4, n_burn=100, n_draws=150, seed=3, backend="vectorised",
+        observations=a.observations, fixed={keep: value},
+    )  # fmt: skip
+    np.testing.assert_allclose(post.draws[..., 1], value, rtol=1e-12)
+    assert np.all(np.isnan(post.acceptance[:, 1]))
+    assert np.all(post.acceptance[:, 0] > 0.05)
+    assert np.std(post.draws[..., 0]) > 0.0
+    with pytest.raises(ConfigError, match="cannot hold"):
+        calibrate(em, a, n_chains=2, n_burn=10, n_draws=10, fixed={"nope": 1.0})
+    target = build_target(em, a.w_star, a.lam_star_prior, list(a.priors.values()))
+    sampler = default_sampler(target, 50, "joint")
+    held, x0 = hold_theta(sampler, np.full((4, target.d), 0.5), [np.nan, 0.4])
+    assert tuple(held.fixed or ()) == (1,)
+    assert 1 not in held.joint
+    assert 0 in held.joint
+    np.testing.assert_array_equal(x0[:, :2], [[0.5, 0.4]] * 4)

@@ -112,11 +112,19 @@ def identifiability(posterior: Posterior, seed: int = 0) -> Identifiability:
     Parameters
     ----------
     posterior
-        The calibration posterior (its priors give the prior spread).
+        The calibration posterior (its priors give the prior spread). Parameters whose
+        draws are all one value (held, not calibrated) are left out.
     seed
         Seed of the prior draws that measure the prior's spread.
     """
     draws, prior_sd, logs = _working_scale(posterior, seed)
+    # coordinates held at a value (``[design] reuse_screening``'s screened-out inputs) are
+    # not calibrated: the data neither fix them nor correlate them with the others
+    unit = posterior.unit_draws.reshape(-1, len(posterior.names))
+    moving = np.ptp(unit, axis=0) > 0.0
+    names = tuple(n for n, m in zip(posterior.names, moving, strict=True) if m)
+    draws, prior_sd = draws[:, moving], prior_sd[moving]
+    logs = [log for log, m in zip(logs, moving, strict=True) if m]
     z = draws / prior_sd
     cov = np.atleast_2d(np.cov(z, rowvar=False))
     sd = np.sqrt(np.diag(cov))
@@ -129,9 +137,7 @@ def identifiability(posterior: Posterior, seed: int = 0) -> Identifiability:
         exponents = vector / prior_sd  # back to powers of log theta (or multiples of theta)
         exponents = exponents / exponents[np.argmax(np.abs(exponents))]  # largest: +1
         directions.append(Direction(exponents, float(np.sqrt(max(value, 0.0)))))
-    return Identifiability(
-        tuple(posterior.names), tuple(logs), contraction, correlation, tuple(directions)
-    )
+    return Identifiability(names, tuple(logs), contraction, correlation, tuple(directions))
 
 
 def moves_hint(posterior: Posterior) -> str | None:
@@ -151,7 +157,7 @@ def moves_hint(posterior: Posterior) -> str | None:
     draws = posterior.all_draws().reshape(-1, len(posterior.all_names))
     positive = np.all(draws > 0.0, axis=0)
     z = np.where(positive, np.log(np.where(positive, draws, 1.0)), draws)
-    moving = np.std(z, axis=0) > 0.0
+    moving = np.ptp(z, axis=0) > 0.0  # a held coordinate is constant (std may round above 0)
     if np.count_nonzero(moving) < 2:
         return None
     names = [n for n, m in zip(posterior.all_names, moving, strict=True) if m]

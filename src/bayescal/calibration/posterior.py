@@ -337,6 +337,7 @@ def calibrate(
     on_extend: Callable[[int, int], Callable[[int], None] | None] | None = None,
     held: Mapping[str, float] | None = None,
     starts: ArrayLike | None = None,
+    fixed: Mapping[str, float] | None = None,
 ) -> Posterior:
     """Sample theta*, lambda and lambda* (eq. 16) with the hyperparameters at the MAP.
 
@@ -415,6 +416,11 @@ def calibrate(
         ``[START_MARGIN, 1 - START_MARGIN]``, inside every prior's support. The
         precisions (and AR(1) coefficients, discrepancy variances) start as by
         default. ``None`` (default): dispersed starts (:func:`default_starts`).
+    fixed
+        Some parameters -> a value (physical units) each is held at (``"mwg"``
+        only), the others sampled: the emulator's inputs that are not
+        calibrated (``[design] reuse_screening``, :mod:`bayescal.pipeline.reuse`).
+        Their draws all equal these values. Not with ``held``.
 
     Returns
     -------
@@ -424,8 +430,10 @@ def calibrate(
         raise ConfigError(f"backend must be one of {list(BACKENDS)}, got {backend!r}")
     if sampler not in ("mwg", "nuts"):
         raise ConfigError(f"sampler must be 'mwg' or 'nuts', got {sampler!r}")
-    if held is not None and sampler != "mwg":
+    if (held is not None or fixed) and sampler != "mwg":
         raise ConfigError("theta* can be held fixed with sampler 'mwg' only")
+    if held is not None and fixed:
+        raise ConfigError("hold every parameter (held) or some (fixed), not both")
     if sampler == "nuts":
         check_installed()
         if n_burn < NUTS_MIN_WARMUP:
@@ -441,7 +449,7 @@ def calibrate(
                 hint="set [emulator] algebra = 'kronecker' or use sampler 'mwg'",
             )
     prior_map = check_priors(assembled, priors)
-    fixed = None if held is None else _held_unit(held, prior_map)
+    hold, hold_at = _holding(held, fixed, prior_map)
     target = build_target(
         emulator,
         assembled.w_star,
@@ -491,7 +499,8 @@ def calibrate(
                 checkpoint_seconds=checkpoint_seconds,
                 starts=x0,
                 moves=moves,
-                held=fixed,
+                held=hold,
+                held_at=hold_at,
             )
             post = _built(chains, target, prior_map, assembled, seed, algebra, observations)
             if post.diagnostics.ok or kept >= most:
@@ -502,6 +511,27 @@ def calibrate(
             assert checkpoint_dir is not None  # a temporary folder where none was given
             atomic_write_json(Path(checkpoint_dir) / EXTENSION_FILE, plan | {"kept": longer})
             kept = longer
+
+
+def _holding(
+    held: Mapping[str, float] | None,
+    fixed: Mapping[str, float] | None,
+    priors: Mapping[str, Prior],
+) -> tuple[FloatArray | None, list[int] | None]:
+    """The held values on the normalised scale and their coordinates (None: all or none)."""
+    if held is not None:
+        return _held_unit(held, priors), None
+    if not fixed:
+        return None, None
+    unknown = sorted(set(fixed) - set(priors))
+    if unknown:
+        raise ConfigError(f"cannot hold {unknown}: the calibration has {list(priors)}")
+    names = [name for name in priors if name in fixed]
+    unit = np.array([float(priors[name].to_unit(fixed[name])) for name in names])
+    outside = [name for name, u in zip(names, unit, strict=True) if not 0.0 <= u <= 1.0]
+    if outside:
+        raise ConfigError(f"the held value of {outside[0]} lies outside its prior bounds")
+    return unit, [list(priors).index(name) for name in names]
 
 
 def _held_unit(held: Mapping[str, float], priors: Mapping[str, Prior]) -> FloatArray:

@@ -40,6 +40,7 @@ from bayescal.emulator.kron import Lru
 from bayescal.emulator.noise import DELTA_RANGE, PHI_MAX, GlsPieces, ObservationModel
 from bayescal.errors import ConfigError
 from bayescal.mcmc.chains import ChainBackend, Chains, dispersed_starts, run_chains
+from bayescal.mcmc.samplers.base import fixed_mask
 from bayescal.mcmc.samplers.lockstep import LockstepTarget, RowLoop, Stateless
 from bayescal.mcmc.samplers.mwg import MetropolisWithinGibbs
 
@@ -535,33 +536,50 @@ def _start_gammas(target: CalibrationPosterior) -> FloatArray:
 
 
 def hold_theta(
-    sampler: MetropolisWithinGibbs, starts: ArrayLike, u: ArrayLike
+    sampler: MetropolisWithinGibbs,
+    starts: ArrayLike,
+    u: ArrayLike,
+    indices: Sequence[int] | None = None,
 ) -> tuple[MetropolisWithinGibbs, FloatArray]:
-    """The sampler and starts with every theta* coordinate held at ``u`` ``(t,)``.
+    """The sampler and starts with theta* coordinates held at ``u``.
 
-    The chains then sample only ``lambda``, the ``lambda*``, the ``phi`` and the
-    discrepancy's ``r`` of the same target: theta* keeps its start value
-    (the sampler's ``fixed`` coordinates, whose acceptance is NaN, so the
-    diagnostics pass over them), its coordinates leave the joint block and
-    their sampling maps become the identity (a value on a prior bound stays
-    a valid start). The catalogue model of ``bayescal compare`` is this target
-    at the nominal values (:mod:`bayescal.pipeline.catalogue`).
+    ``indices``: the theta* coordinates held, one per entry of ``u`` (default:
+    the first ``len(u)``, every theta* coordinate where ``u`` has ``t``
+    entries, except those where ``u`` is NaN). The chains then sample the
+    other coordinates of the same target (with every theta* held: only
+    ``lambda``, the ``lambda*``, the ``phi`` and the discrepancy's ``r``): a
+    held coordinate keeps its start value (the sampler's ``fixed``
+    coordinates, whose acceptance is NaN, so the diagnostics pass over them),
+    leaves the joint block and its sampling map becomes the identity (a value
+    on a prior bound stays a valid start). The catalogue model of ``bayescal
+    compare`` is this target at the nominal values
+    (:mod:`bayescal.pipeline.catalogue`); ``[design] reuse_screening`` holds
+    the screened-out inputs of the emulator at theirs
+    (:mod:`bayescal.pipeline.reuse`).
     """
     held = np.asarray(u, dtype=float).reshape(-1)
-    t = held.size
+    if indices is None:  # NaN entries: coordinates sampled, not held
+        at = np.flatnonzero(~np.isnan(held)).tolist()
+        held = held[at]
+    else:
+        at = [int(i) for i in indices]
+    if len(at) != held.size:
+        raise ValueError(f"{held.size} held values for {len(at)} coordinates")
     if not np.all((held >= 0.0) & (held <= 1.0)):
         raise ConfigError(f"held theta* {held.tolist()} lies outside the prior bounds [0, 1]")
     x0 = np.array(starts, dtype=float)
-    x0[:, :t] = held
+    x0[:, at] = held
     d = x0.shape[1]
     lower = list(sampler.lower if sampler.lower is not None else [-math.inf] * d)
     upper = list(sampler.upper if sampler.upper is not None else [math.inf] * d)
-    lower[:t], upper[:t] = [-math.inf] * t, [math.inf] * t
-    joint = tuple(i for i in sampler.joint if i >= t)
+    for i in at:
+        lower[i], upper[i] = -math.inf, math.inf
+    joint = tuple(i for i in sampler.joint if i not in at)
     joint = joint if len(joint) >= 2 else ()
+    fixed = sorted({*at, *(np.flatnonzero(fixed_mask(sampler.fixed, d)).tolist())})
     held_sampler = dataclasses.replace(
         sampler,
-        fixed=tuple(range(t)),
+        fixed=tuple(fixed),
         lower=lower,
         upper=upper,
         joint=joint,
@@ -587,6 +605,7 @@ def sample(
     sampler: Any = None,
     moves: Moves = "gibbs",
     held: ArrayLike | None = None,
+    held_at: Sequence[int] | None = None,
 ) -> Chains:
     """Metropolis-within-Gibbs sweeps of ``target``, no diagnostics.
 
@@ -616,6 +635,8 @@ def sample(
         theta* on the normalised scale ``(t,)`` to hold fixed (:func:`hold_theta`;
         a Metropolis-within-Gibbs ``sampler`` only): the chains sample the error
         model's parameters alone. ``None``: theta* is sampled.
+    held_at
+        The theta* coordinates ``held`` holds, one per entry (default: all of them).
 
     Returns
     -------
@@ -625,7 +646,7 @@ def sample(
     x0 = default_starts(target, n_chains, seed) if starts is None else starts
     chosen = default_sampler(target, n_burn, moves) if sampler is None else sampler
     if held is not None:
-        chosen, x0 = hold_theta(chosen, x0, held)
+        chosen, x0 = hold_theta(chosen, x0, held, held_at)
     return run_chains(
         chosen,
         target,

@@ -7,6 +7,9 @@ emulator is least sure, until the emulator's error measured on a new batch is
 small against the measurement noise, or ``max_runs`` or ``max_minutes`` is
 reached (:mod:`bayescal.pipeline.seqdesign`, docs/method.md section
 "Sequential design").
+
+``reuse_screening = true`` puts the runs of a Sobol screening first in the
+design (:mod:`bayescal.pipeline.reuse`).
 """
 
 from __future__ import annotations
@@ -79,6 +82,21 @@ class DesignSection(Section):
         default=None,
         gt=0,
     )
+    reuse_screening: bool = field_doc(
+        "Train the emulator on the runs of the Sobol screening too ([screening] method = "
+        "'sobol', run by `bayescal screen` into the same output folder): the design is the "
+        "screening's Latin hypercube followed by `runs` new runs, which vary the calibrated "
+        "parameters and hold the screened-out candidates at their nominal values. The "
+        "emulator's parameter inputs are then every parameter the screening varied, and the "
+        "calibration and predictions hold the screened-out ones at their nominal values "
+        "(they are not calibrated); the screening runs come from the run cache, not the "
+        "simulator. Not with a Morris screening, sequential = true, sampler 'nuts', "
+        "[discrepancy] enabled or [study] prior_from. Off by default: it changes the "
+        "emulator's inputs (more of them, a longer training) and needs the screening's "
+        "results in the output folder.",
+        True,
+        default=False,
+    )
 
     def key_dump(self) -> dict[str, Any]:
         """The section as the design stage's key sees it (without the sequential keys
@@ -87,6 +105,8 @@ class DesignSection(Section):
         if not self.sequential:
             for name in SEQUENTIAL_KEYS:
                 dump.pop(name, None)
+        if not self.reuse_screening:  # a study without it keeps the key it always had
+            dump.pop("reuse_screening", None)
         return dump
 
     def batch_size(self, parameters: int) -> int:

@@ -377,7 +377,7 @@ class Study(Section):
         problems += _derived_problems(self)
         problems += reserved_name_problems(self.parameters, self.outputs.calibrate)
         problems += reserved_name_problems(self.derived, self.outputs.calibrate, "derived")
-        problems += _sampler_problems(self) + _aggregate_problems(self)
+        problems += _sampler_problems(self) + _aggregate_problems(self) + _reuse_problems(self)
         t = len(self.calibrated)
         if t and self.design.runs < t + 2:
             problems.append(
@@ -646,6 +646,32 @@ def _period_problems(study: Study) -> list[str]:
 
 
 #: Warm-up iterations NUTS needs at least (its window adaptation fails on fewer).
+
+
+def _reuse_problems(study: Study) -> list[str]:
+    """What ``[design] reuse_screening = true`` cannot be combined with."""
+    if not study.design.reuse_screening:
+        return []
+    key = "design.reuse_screening"
+    if study.screening.method != "sobol":
+        return [
+            f"{key}: only a Sobol screening's Latin hypercube can join the design, and "
+            f"[screening] method is {study.screening.method!r} (Morris trajectories move one "
+            "parameter at a time on a coarse grid); set method = 'sobol' and run `bayescal "
+            "screen` again, or set reuse_screening = false"
+        ]
+    why = {
+        "calibration.sampler = 'nuts'": study.calibration.sampler == "nuts",
+        "[discrepancy] enabled": study.discrepancy.enabled,
+        "[study] prior_from": study.study.prior_from is not None,
+        "[design] sequential = true": study.design.sequential,
+    }
+    return [
+        f"{key}: cannot be combined with {what} (it does not hold the screened-out "
+        "parameters at their nominal values); set reuse_screening = false"
+        for what, found in why.items()
+        if found
+    ]
 
 
 def _sampler_problems(study: Study) -> list[str]:

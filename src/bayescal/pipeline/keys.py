@@ -157,6 +157,8 @@ def keys_and_inputs(ctx: Context) -> tuple[dict[str, str], dict[str, dict[str, s
             ("emulator", dump["emulator"], True),
             ("calibration", dump["calibration"], True),
         ]
+    if s.design.reuse_screening:  # the screening's hypercube is the design's first runs
+        design.append(("screening", dump["screening"], True))
     if s.study.prior_from is not None:  # the previous posterior's density, not only its path
         specs = {n: p.spec() for n, p in ctx.priors.items()}
         design.append(("study.prior_from (the previous posterior)", specs, False))

@@ -38,6 +38,7 @@ from bayescal.discrepancy import Discrepancy
 from bayescal.errors import BayescalError, ConfigError, DataError
 from bayescal.pipeline.budget import check_budget, estimate_time
 from bayescal.pipeline.keys import keys_and_inputs
+from bayescal.pipeline.reuse import nominal_accuracy, screening_rows
 from bayescal.pipeline.route import check_route
 from bayescal.pipeline.seqdesign import sequential_design
 from bayescal.pipeline.stages import (
@@ -290,6 +291,13 @@ def _design(r: _Runner) -> Design:
         design, _ = sequential_design(r.ctx, r.keys["design"], r.say)
     else:
         design = make_design(r.ctx)
+    if r.ctx.held or r.ctx.study.design.reuse_screening:
+        rows = screening_rows(r.ctx.study)
+        r._note(
+            f"design: the {rows} runs of the Sobol screening, then {design.runs - rows} new "
+            f"runs over the {len(r.ctx.study.calibrated)} calibrated parameters (the "
+            f"{len(r.ctx.held)} screened-out ones at their nominal values)"
+        )
     design_store.save_design(design, path)
     r.finish("design", [design_store.FILE], start)
     return design
@@ -352,6 +360,14 @@ def _emulator(r: _Runner, sims: RunResults) -> EmulatorResult:
             f"emulator: leave-one-run-out RMSE of {name} {rmse:.4g} "
             f"(output SD {em.loo.output_sd[name]:.4g}{scale}); {em.emulator.basis.p} basis vectors"
         )
+    if r.ctx.held:  # where the calibration evaluates it: the screened-out inputs at nominal
+        rows = screening_rows(r.ctx.study)
+        for name, (new, old) in nominal_accuracy(em.loo, sims, rows, tuple(em.loo.rmse)).items():
+            r._note(
+                f"emulator: leave-one-run-out RMSE of {name} at the nominal values of the "
+                f"{len(r.ctx.held)} screened-out parameters {new:.4g} ({sims.design.runs - rows} "
+                f"new runs), at the {rows} reused screening runs {old:.4g}"
+            )
     r.finish("emulator", [emulator_store.FILE, emulator_store.CV_FILE], start)
     return em
 

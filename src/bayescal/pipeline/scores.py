@@ -91,7 +91,9 @@ def score_calibration(
         Added to the key (another model of the same study).
     held
         theta* on the normalised scale held fixed in the refits, as in the
-        posterior (the catalogue model); ``None``: sampled.
+        posterior (the catalogue model; NaN: that coordinate sampled); ``None``:
+        sampled, but for ``[design] reuse_screening``'s screened-out inputs (held at
+        their nominal values, as in the calibration).
     outputs
         The calibrated outputs scored (``None``: all; a subset is what variants that
         calibrate different outputs share, :func:`~bayescal.calibration.cv.leave_period_out`).
@@ -130,6 +132,10 @@ def score_calibration(
     todo = scores.refit_order()[: max(0, max_refits - int(np.sum(scores.refitted)))]
     cal = ctx.study.calibration
     priors = posterior.priors if isinstance(posterior, Posterior) else em.assembled.priors
+    if held is None and ctx.held:  # reuse_screening's screened-out inputs, as in the posterior
+        held = np.array(
+            [float(p.to_unit(ctx.held[n])) if n in ctx.held else np.nan for n, p in priors.items()]
+        )
     seed_name = "-".join((*what, "leave-period-out"))  # the same refit chains whatever is scored
     for i in todo:
         total = cal.chains * (cal.burn + cal.samples)

@@ -35,10 +35,11 @@ import numpy as np
 from bayescal.config import Study, build_simulator
 from bayescal.config.edit import set_screen_flags
 from bayescal.data.measured import MeasuredData, load_measured
-from bayescal.design import Design, latin_hypercube
+from bayescal.design import Design
 from bayescal.errors import ConfigError
 from bayescal.pipeline.budget import check_budget, screening_need
 from bayescal.pipeline.keys import derived_seed
+from bayescal.pipeline.reuse import screening_design
 from bayescal.pipeline.run import writing
 from bayescal.pipeline.stages import Options
 from bayescal.report.screening import write_screening_report, write_sobol_report
@@ -194,15 +195,8 @@ def screen(
     k = len(priors)
     morris: MorrisDesign | None = None
     if section.method == "sobol":
-        if k < 2:
-            raise ConfigError(f"screening needs at least two parameters, got {list(priors)}")
-        size = section.sobol_runs(k)
-        if size < k + 2:
-            raise ConfigError(
-                f"screening.runs = {size} is too few for {k} parameters: the Sobol method's "
-                f"GP needs at least {k + 2} (10 × k = {10 * k} is usual)"
-            )
-        design = latin_hypercube(priors, size, seed)
+        design = screening_design(study)  # the same values a reused design runs
+        size = design.runs
         plan = f"a Latin hypercube of {size} runs (Sobol indices through a GP)"
     else:
         morris = morris_design(list(priors), section.trajectories, section.levels, seed)

@@ -50,6 +50,7 @@ from bayescal.pipeline.predict import (
     simulator_band,
     windows,
 )
+from bayescal.pipeline.reuse import emulator_priors, held_parameters, reuse_design
 from bayescal.pipeline.simnoise import simulator_noise
 from bayescal.runner import Progress, RunResults, run_design
 from bayescal.simulators.base import Derivable, Simulator
@@ -122,11 +123,21 @@ class Context:
 
     @cached_property
     def priors(self) -> dict[str, Prior]:
-        """The study's priors, in parameter order (``[study] prior_from`` applied:
-        :mod:`bayescal.pipeline.sequential`)."""
+        """The priors of the emulator's parameter inputs, in parameter order: the study's
+        calibrated ones (``[study] prior_from`` applied: :mod:`bayescal.pipeline.sequential`)
+        or, with ``[design] reuse_screening``, every parameter (:mod:`bayescal.pipeline.reuse`;
+        :attr:`held` are not calibrated)."""
         from bayescal.pipeline.sequential import study_priors
 
+        if self.study.design.reuse_screening:
+            return emulator_priors(self.study)
         return study_priors(self.study)
+
+    @property
+    def held(self) -> dict[str, float]:
+        """The emulator's inputs held at their nominal values in the calibration and the
+        predictions (``[design] reuse_screening``'s screened-out candidates; else empty)."""
+        return held_parameters(self.study)
 
     @property
     def transforms(self) -> dict[str, LogLevel]:
@@ -154,7 +165,9 @@ class Context:
 def prepare(study: Study, options: Options | None = None) -> Context:
     """Load the measured data and build the simulator (errors surface here, before any run)."""
     measured = load_measured(study)
-    simulator = build_simulator(study)
+    # reused screening runs: the screening's simulator (every parameter free), whose
+    # cache keys they have; new runs pass the nominal values of the screened-out ones
+    simulator = build_simulator(study, screening=study.design.reuse_screening)
     out = study.root / study.study.output_dir
     ctx = Context(study, measured, simulator, out, options or Options())
     level_values(ctx, {n: measured.outputs[n] for n in ctx.transforms}, "measured")
@@ -189,11 +202,16 @@ def level_values(
 
 
 def make_design(ctx: Context) -> Design:
-    """The Latin hypercube of ``[design]`` over the priors' bounds."""
+    """The Latin hypercube of ``[design]`` over the priors' bounds; with ``reuse_screening``
+    the screening's runs, then that hypercube over the calibrated parameters
+    (:func:`bayescal.pipeline.reuse.reuse_design`)."""
     section = ctx.study.design
     optimization = None if section.optimization == "none" else section.optimization
     seed = ctx.seed("design", section.seed)
-    return latin_hypercube(ctx.priors, section.runs, seed, optimization)
+    if not section.reuse_screening:
+        return latin_hypercube(ctx.priors, section.runs, seed, optimization)
+    calibrated = {name: ctx.priors[name] for name in ctx.study.calibrated}
+    return reuse_design(ctx.study, latin_hypercube(calibrated, section.runs, seed, optimization))
 
 
 def _runner_options(ctx: Context) -> dict[str, Any]:
@@ -374,6 +392,7 @@ def calibrate_stage(
             max_draws=section.most_samples,
             on_extend=extend,
             starts=sequential.warm_starts(ctx.study, section.chains),
+            fixed=ctx.held,
         )
     finally:
         close()

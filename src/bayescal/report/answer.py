@@ -139,7 +139,8 @@ def quantities_table(
     for k, name in enumerate(posterior.names):
         prior = posterior.priors[name]
         columns.append((name, posterior.draws[..., k], prior.unit, prior.description))
-    contraction = dict(zip(posterior.names, identifiability(posterior).contraction, strict=True))
+    ident = identifiability(posterior)  # held parameters (not calibrated) have none: "–"
+    contraction = dict(zip(ident.names, ident.contraction, strict=True))
     tail = 50.0 * (1.0 - level)
     rows: list[list[object]] = []
     for name, draws, unit, text in columns:

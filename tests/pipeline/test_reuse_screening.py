@@ -1,0 +1,224 @@
+"""``[design] reuse_screening``: a Sobol screening's runs join the calibration's design.
+
+A 14-day virtual wall record (the built-in wall at a known truth, white noise;
+:mod:`sequential_study`) calibrates the concrete's conductivity and specific heat;
+the boards' conductivity and density are screening candidates held at their
+nominal values, which are the truth's. The screening's Latin hypercube varies
+all four; with ``reuse_screening`` its runs come first in the design, from the
+run cache, and the emulator takes all four as inputs.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+from bayescal.calibration.identifiability import identifiability
+from bayescal.config import load_study
+from bayescal.errors import ConfigError
+from bayescal.pipeline import Options, run
+from bayescal.pipeline.reuse import screening_design
+from bayescal.pipeline.screen import screen
+from bayescal.runner import sandbox
+from sequential_study import END, TRUTH, write_study
+
+pytest.importorskip("SALib", reason="Sobol screening needs SALib")
+
+SERIAL = Options(backend="serial", chains_backend="serial")
+EXECUTE = sandbox.execute
+SCREENING_RUNS = 12
+NEW_RUNS = 8
+CANDIDATES = """
+[parameters.k_fb]
+unit = "W/(m·K)"
+nominal = 0.0316
+prior = { distribution = "uniform", lower = 0.025, upper = 0.04 }
+targets = ["board_out.conductivity", "board_in.conductivity"]
+screen = true
+
+[parameters.d_fb]
+unit = "kg/m3"
+nominal = 116.6
+prior = { distribution = "uniform", lower = 110.0, upper = 125.0 }
+targets = ["board_out.density", "board_in.density"]
+screen = true
+"""
+SOBOL = f"""
+[screening]
+method = "sobol"
+runs = {SCREENING_RUNS}
+paths = 5
+saltelli = 256
+bootstrap = 50
+"""
+
+
+class Counting:
+    """``sandbox.execute`` that counts the simulator runs."""
+
+    def __init__(self) -> None:
+        self.calls = 0
+
+    def __call__(self, simulator: Any, forcing: Any, parameters: dict[str, float]) -> Any:
+        self.calls += 1
+        return EXECUTE(simulator, forcing, parameters)
+
+
+def _study(folder: Path, design: str = "reuse_screening = true\n", screening: str = SOBOL) -> Path:
+    """The virtual wall's study with the two candidates, ``[design]`` lines and ``screening``."""
+    write_study(folder, END)
+    path = folder / "study.toml"
+    text = path.read_text(encoding="utf-8")
+    assert f"[design]\nruns = {NEW_RUNS}\n" in text
+    text = text.replace(f"[design]\nruns = {NEW_RUNS}\n", f"[design]\nruns = {NEW_RUNS}\n{design}")
+    path.write_text(text + CANDIDATES + screening, encoding="utf-8")
+    return folder
+
+
+@pytest.fixture(scope="module")
+def reused(tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict[str, Any]]:
+    """Screen, then run to the predictions, counting the simulator runs of each step."""
+    folder = _study(tmp_path_factory.mktemp("reuse") / "wall")
+    with pytest.MonkeyPatch.context() as patch:
+        counts: dict[str, int] = {}
+        said: list[str] = []
+        for step in ("screen", "simulate", "predict", "again"):
+            counter = Counting()
+            patch.setattr(sandbox, "execute", counter)
+            study = load_study(folder)
+            if step == "screen":
+                screen(study, options=SERIAL)
+                result = None
+            else:
+                until = "simulate" if step == "simulate" else "predict"
+                result = run(study, until=until, options=SERIAL, say=said.append)
+            counts[step] = counter.calls
+        yield {"folder": folder, "counts": counts, "said": said, "results": result}
+
+
+def test_the_screening_runs_are_not_run_again(reused: dict[str, Any]) -> None:
+    counts = reused["counts"]
+    assert counts["screen"] == SCREENING_RUNS
+    assert counts["simulate"] == NEW_RUNS  # the screening's runs came from the cache
+    res = reused["results"]
+    assert res.simulations.n_cached == SCREENING_RUNS + NEW_RUNS  # all cached by then
+    predictions = counts["predict"]
+    study = load_study(reused["folder"])
+    assert predictions == study.predict.runs + 1  # posterior draws and the nominal run only
+    assert counts["again"] == 0  # every stage reused
+
+
+def test_the_design_is_the_screening_then_the_new_runs(reused: dict[str, Any]) -> None:
+    study = load_study(reused["folder"])
+    design = reused["results"].design
+    assert design.runs == SCREENING_RUNS + NEW_RUNS
+    assert design.names == ("k_cb", "cp_cb", "k_fb", "d_fb")
+    screening = screening_design(study)
+    np.testing.assert_array_equal(design.values[:SCREENING_RUNS], screening.values)
+    new = design.values[SCREENING_RUNS:]
+    np.testing.assert_allclose(new[:, 2], 0.0316, rtol=1e-12)
+    np.testing.assert_allclose(new[:, 3], 116.6, rtol=1e-12)
+    for k in (0, 1):  # the calibrated ones vary over their ranges
+        assert np.ptp(new[:, k]) > 0.5 * (design.priors[design.names[k]].upper
+                                          - design.priors[design.names[k]].lower)  # fmt: skip
+    said = reused["said"]
+    assert any(f"the {SCREENING_RUNS} runs of the Sobol screening, then {NEW_RUNS}" in s
+               for s in said)  # fmt: skip
+
+
+def test_the_emulator_takes_the_screened_out_inputs(reused: dict[str, Any]) -> None:
+    em = reused["results"].emulator
+    assert em.emulator.parameter_names == ("k_cb", "cp_cb", "k_fb", "d_fb")
+    assert em.assembled.theta.shape == (SCREENING_RUNS + NEW_RUNS, 4)
+    # its accuracy where the calibration uses it (the screened-out inputs at nominal) is said
+    line = next(s for s in reused["said"] if "at the nominal values of the 2 screened-out" in s)
+    new = float(line.split("screened-out parameters ")[1].split(" ")[0])
+    # small against the noise SD the data were made with (0.1 W/m2: virtual_wall)
+    assert 0.0 < new < 0.3
+
+
+def test_the_calibration_holds_them_at_nominal_and_covers_the_truth(
+    reused: dict[str, Any],
+) -> None:
+    post = reused["results"].posterior
+    assert post.names == ("k_cb", "cp_cb", "k_fb", "d_fb")
+    draws = post.draws.reshape(-1, 4)
+    np.testing.assert_allclose(draws[:, 2], 0.0316, rtol=1e-12)
+    np.testing.assert_allclose(draws[:, 3], 116.6, rtol=1e-12)
+    for k, name in enumerate(("k_cb", "cp_cb")):
+        lower, upper = np.quantile(draws[:, k], [0.025, 0.975])
+        assert lower <= TRUTH[name] <= upper, (name, lower, upper)
+        assert np.std(draws[:, k]) > 0.0
+    # the interval is narrower than the prior: the data, not the prior, place it
+    assert np.ptp(np.quantile(draws[:, 0], [0.025, 0.975])) < 0.2 * (0.16 - 0.08)
+    # what the data fix is said of the calibrated parameters only (the held are not fixed
+    # by the data, nor correlated with anything)
+    ident = identifiability(post)
+    assert ident.names == ("k_cb", "cp_cb")
+    assert ident.correlation.shape == (2, 2)
+
+
+def test_without_a_screening_it_says_to_screen_first(tmp_path: Path) -> None:
+    study = load_study(_study(tmp_path / "wall"))
+    with pytest.raises(ConfigError, match=r"holds no screening to reuse") as info:
+        run(study, until="design", options=SERIAL)
+    assert "bayescal screen" in info.value.one_line()
+    assert "\n" not in info.value.one_line()
+
+
+def test_a_screening_with_other_settings_is_refused(tmp_path: Path) -> None:
+    folder = _study(tmp_path / "wall")
+    screen(load_study(folder), options=SERIAL)
+    path = folder / "study.toml"
+    path.write_text(
+        path.read_text(encoding="utf-8").replace(
+            f"runs = {SCREENING_RUNS}\n", f"runs = {SCREENING_RUNS + 2}\n"
+        ),
+        encoding="utf-8",
+    )
+    with pytest.raises(ConfigError, match=r"was run with other settings") as info:
+        run(load_study(folder), until="design", options=SERIAL)
+    assert "run `bayescal screen` again" in info.value.one_line()
+
+
+@pytest.mark.parametrize(
+    ("design", "screening", "match"),
+    [
+        ("reuse_screening = true\n", "\n[screening]\ntrajectories = 4\n",
+         r"design\.reuse_screening: only a Sobol screening's Latin hypercube can join the "
+         r"design, and \[screening\] method is 'morris'.*set method = 'sobol'"),
+        ("reuse_screening = true\nsequential = true\n", SOBOL,
+         r"design\.reuse_screening: cannot be combined with \[design\] sequential = true"),
+    ],
+)  # fmt: skip
+def test_impossible_combinations_are_one_line(
+    tmp_path: Path, design: str, screening: str, match: str
+) -> None:
+    with pytest.raises(ConfigError, match=match) as info:
+        load_study(_study(tmp_path / "wall", design, screening))
+    assert "\n" not in str(info.value)
+
+
+def test_off_by_default_keeps_the_design(tmp_path: Path) -> None:
+    study = load_study(_study(tmp_path / "wall", design="", screening=SOBOL))
+    assert not study.design.reuse_screening
+    assert "reuse_screening" not in study.design.key_dump()
+
+
+def test_a_morris_screening_in_the_folder_is_refused(tmp_path: Path) -> None:
+    folder = _study(tmp_path / "wall", design="", screening="\n[screening]\ntrajectories = 3\n")
+    screen(load_study(folder), options=SERIAL)  # Morris, into the same output folder
+    path = folder / "study.toml"
+    text = (
+        path.read_text(encoding="utf-8")
+        .replace("\n[screening]\ntrajectories = 3\n", SOBOL)
+        .replace(f"runs = {NEW_RUNS}\n", f"runs = {NEW_RUNS}\nreuse_screening = true\n", 1)
+    )
+    path.write_text(text, encoding="utf-8")
+    with pytest.raises(ConfigError, match=r"is a morris screening, whose runs cannot join") as info:
+        run(load_study(folder), until="design", options=SERIAL)
+    assert "method = 'sobol'" in info.value.one_line()
