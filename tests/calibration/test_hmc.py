@@ -382,7 +382,7 @@ def test_pipeline_stage_passes_the_sampler(monkeypatch: pytest.MonkeyPatch) -> N
 
     monkeypatch.setattr(stages, "calibrate", record)
     monkeypatch.setattr(stages, "derived_draws", lambda ctx, post: {})
-    ctx = SimpleNamespace(study=study, options=stages.Options(), seed=lambda *args: 0)
+    ctx = SimpleNamespace(study=study, options=stages.Options(), seed=lambda *args: 0, held={})
     em = SimpleNamespace(emulator=None, assembled=SimpleNamespace(observations=None))
     stages.calibrate_stage(ctx, em)  # type: ignore[arg-type]
     assert seen["sampler"] == "nuts"
