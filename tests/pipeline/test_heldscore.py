@@ -87,6 +87,30 @@ def test_the_table_ranks_within_each_sensor_and_the_catalogue_warning(case: tupl
     # ... but ahead of it: said loudly, naming the sensor
     scored[2] = ("catalogue", "catalogue", False, {"T": _score(-0.02, case)})
     warned = held_out_warnings(scored)
+    assert len(warned) == 2, warned
+    assert warned[0].startswith("on the held-out sensor T (never calibrated on), the catalogue")
+    # ... and the variant whose mean lies further off than the catalogue's, by its RMSE
+    assert warned[1].startswith("on the held-out sensor T (never calibrated on), the calibrated")
+    assert "RMSE off " in warned[1]
+    assert "good" not in warned[1]
+    assert all("the parameters absorb model error" in w for w in warned)
+
+
+def test_a_wide_posterior_can_win_the_density_and_lose_the_rmse(case: tuple) -> None:
+    # draws spread widely around a biased mean cover the bias with their spread; the
+    # catalogue's single run is closer on average: the density ranks the calibration
+    # first, the RMSE rule still warns
+    layout, y, runs = case
+    rng = np.random.default_rng(9)
+    centre = runs.mean(axis=0)
+    wide = centre[None] + 0.35 + rng.normal(0.0, 0.5, (40, 1))
+    sd = 0.1
+    cal = score_held_out(layout, y, wide, sd)
+    cat = score_held_out(layout, y, centre + 0.2, sd)
+    assert cal.lpd > cat.lpd
+    assert cal.rmse > 1.05 * cat.rmse
+    warned = held_out_warnings(
+        [("wide", "calibrated", False, {"T": cal}), ("catalogue", "catalogue", False, {"T": cat})]
+    )
     assert len(warned) == 1
-    assert warned[0].startswith("on the held-out sensor T (never calibrated on)")
-    assert "the parameters absorb model error" in warned[0]
+    assert "the calibrated prediction is further off than the catalogue values'" in warned[0]

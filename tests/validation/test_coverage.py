@@ -35,7 +35,8 @@ error of the observation: the "logger" records half-hour means while the model
 gives instantaneous values; a wall with a 15 mm plaster layer the model lacks,
 calibrated with a discrepancy in the likelihood (its band conditioned on the
 training residuals); and a wall whose conductivities rise with temperature
-(``helpers/nonlinear_wall.py``), the model's constant, with the same discrepancy. In the interval-means experiment the parameters the missing physics does not
+(``helpers/nonlinear_wall.py``), the model's constant, with the same discrepancy.
+In the interval-means experiment the parameters the missing physics does not
 alias into (k_cb, cp_fb), the wall's thermal resistance, and the bands keep
 their rates; the concrete's heat capacity does not: a half-hour mean lags the
 instantaneous flux by about 15 minutes, which the model can only reproduce with
