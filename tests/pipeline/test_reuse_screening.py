@@ -162,6 +162,20 @@ def test_the_calibration_holds_them_at_nominal_and_covers_the_truth(
     assert ident.correlation.shape == (2, 2)
 
 
+def test_show_lists_the_held_ones_apart_from_the_posterior(reused: dict[str, Any]) -> None:
+    from bayescal.cli.progress import describe
+
+    text = describe(reused["results"])
+    table = text.split("posterior (physical units):")[1].split("held at their nominal")[0]
+    assert "k_cb" in table
+    assert "k_fb" not in table
+    assert "d_fb" not in table
+    assert "held at their nominal values, not calibrated (screened out; the emulator keeps " in (
+        text
+    )
+    assert ": k_fb 0.0316, d_fb 116.6" in text
+
+
 def test_without_a_screening_it_says_to_screen_first(tmp_path: Path) -> None:
     study = load_study(_study(tmp_path / "wall"))
     with pytest.raises(ConfigError, match=r"holds no screening to reuse") as info:

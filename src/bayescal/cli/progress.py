@@ -231,7 +231,15 @@ def describe(res: Results) -> str:
     lines = [f"study {res.context.study.study.name!r} -> {res.context.out}", *first]
     if res.posterior is not None:
         table = res.posterior.summary()
+        held = res.context.held  # reuse_screening's screened-out inputs: not calibrated
+        table = table.drop(index=[n for n in held if n in table.index])
         lines += ["", "posterior (physical units):", table.to_string(float_format="{:.5g}".format)]
+        if held:
+            values = ", ".join(f"{n} {v:.5g}" for n, v in held.items())
+            lines.append(
+                f"held at their nominal values, not calibrated (screened out; the emulator "
+                f"keeps them as inputs for the reused screening runs): {values}"
+            )
         sds = res.posterior.noise_sd()
         for o in res.posterior.noise:
             sd = sds[o.name].reshape(-1)
