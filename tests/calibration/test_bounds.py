@@ -67,3 +67,14 @@ def test_the_warning_names_the_bound_its_unit_and_what_it_means() -> None:
     assert MEANING in text
     assert "fitting constant" in text
     assert bound_warnings(rng.random((2, 500, 2)), priors) == ()
+
+
+def test_a_parameter_held_on_a_bound_is_not_flagged() -> None:
+    # reuse_screening holds a screened-out input at its nominal value, which may lie on
+    # a bound: all its draws sit in the edge band, yet it was never free to lean
+    rng = np.random.default_rng(5)
+    draws = np.stack(
+        [np.zeros((4, 300)), _piled_at_upper(rng, (4, 300)), np.full((4, 300), 0.3)], axis=-1
+    )
+    leans = bound_leans(draws, ["held", "piled", "inside"])
+    assert [(lean.name, lean.side) for lean in leans] == [("piled", "upper")]

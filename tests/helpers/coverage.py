@@ -23,6 +23,7 @@ from bayescal.emulator.assemble import Assembled, NoiseSpec, assemble
 from bayescal.emulator.gp import Emulator
 from bayescal.emulator.noise import ErrorModel, ObservationModel
 from bayescal.emulator.training import train
+from bayescal.periods import PeriodLayout
 from bayescal.pipeline.predict import (
     conditioned_discrepancy,
     predict_band,
@@ -35,7 +36,6 @@ from bayescal.simulators.wrappers import IntervalMeans
 from nonlinear_wall import ConductivityWall
 from virtual_wall import (
     NOISE_VARIANCE,
-    PER_DAY,
     PRIORS,
     paper_wall,
     random_truth,
@@ -203,8 +203,9 @@ def run_case(
         em50[window] = float(np.mean((y[mask] >= lo) & (y[mask] <= hi)))
     sizes = discrepancy_ratios(em, post)
     size = sizes[0] if sizes else None
+    actual = _derived_truth(truth, true_wall, ve.boundary, ve.layout)
     return CaseResult(
-        truth, covered, _derived_covered(post, _derived_truth(truth, true_wall, ve.boundary)),
+        truth, covered, _derived_covered(post, actual),
         band95, band50, post, samples,
         bool(sd_lo <= noise_sd <= sd_hi), (float(sd_lo), float(sd_hi)), em95, em50,
         None if size is None else tuple(np.quantile(size.ratio, [0.025, 0.5, 0.975])),
@@ -236,15 +237,14 @@ def _derived_truth(
     truth: dict[str, float],
     true_wall: MultilayerWall | ConductivityWall | None,
     boundary: dict[str, np.ndarray],
+    layout: PeriodLayout,
 ) -> dict[str, float]:
     """R, U and areal heat capacity of the wall that made the measurements; a wall whose
     conductivities depend on temperature gives its steady ones at the mean surface
-    temperatures of the training days (the test days left out)."""
+    temperatures of the training periods (warm-up and test days left out)."""
     if isinstance(true_wall, ConductivityWall):
-        n_train = next(iter(boundary.values())).size - TEST_DAYS * PER_DAY
-        t_out, t_in = (
-            float(np.mean(boundary[k][:n_train])) for k in ("temp_surf_out", "temp_surf_in")
-        )
+        idx = (layout.train_starts[:, None] + np.arange(layout.period)).ravel()
+        t_out, t_in = (float(np.mean(boundary[k][idx])) for k in ("temp_surf_out", "temp_surf_in"))
         return true_wall.derived_at(truth, t_out, t_in)
     return (true_wall or paper_wall()).derived(truth)
 

@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import pandas as pd
 import pytest
 
 from bayescal.calibration.identifiability import identifiability
@@ -137,8 +138,10 @@ def test_the_emulator_takes_the_screened_out_inputs(reused: dict[str, Any]) -> N
     # its accuracy where the calibration uses it (the screened-out inputs at nominal) is said
     line = next(s for s in reused["said"] if "at the nominal values of the 2 screened-out" in s)
     new = float(line.split("screened-out parameters ")[1].split(" ")[0])
-    # small against the noise SD the data were made with (0.1 W/m2: virtual_wall)
-    assert 0.0 < new < 0.3
+    # no worse at the nominal slice than over all the runs, the screening's included
+    # (measured 0.085 against 0.091 W/m²; the noise SD of the data is 0.084)
+    overall = float(em.loo.rmse["heat_flux_in"])
+    assert 0.0 < new < 1.25 * overall
 
 
 def test_the_calibration_holds_them_at_nominal_and_covers_the_truth(
@@ -236,3 +239,67 @@ def test_a_morris_screening_in_the_folder_is_refused(tmp_path: Path) -> None:
     with pytest.raises(ConfigError, match=r"is a morris screening, whose runs cannot join") as info:
         run(load_study(folder), until="design", options=SERIAL)
     assert "method = 'sobol'" in info.value.one_line()
+
+
+def test_the_report_leaves_the_held_ones_out_of_its_table_and_figures(
+    reused: dict[str, Any], tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from bayescal.pipeline import write_study_report
+    from bayescal.report import figures
+
+    post = reused["results"].posterior
+    assert post.held_names == ("k_fb", "d_fb")
+    labels: dict[str, list[str]] = {}
+    save = figures.save_figure
+
+    def keep_labels(fig: Any, path: Any) -> Any:
+        shown = [a for a in fig.axes if a.get_visible()]
+        labels[Path(path).name] = [a.get_xlabel() + a.get_ylabel() for a in shown]
+        return save(fig, path)
+
+    monkeypatch.setattr(figures, "save_figure", keep_labels)
+    for plot in (figures.plot_posterior_histograms, figures.plot_traces, figures.plot_pairs):
+        plot(tmp_path / f"{plot.__name__}.png", post)
+    for name, found in labels.items():
+        text = " ".join(found)
+        assert "k_cb" in text, name
+        assert "k_fb" not in text, name
+        assert "d_fb" not in text, name
+    assert len(labels["plot_pairs.png"]) == 3  # 2 x 2, the upper corner hidden
+    page = write_study_report(reused["results"]).read_text(encoding="utf-8")
+    held = "Held at their nominal values, not calibrated: k_fb, d_fb."
+    assert held in page
+    # the posterior table after that note (the screening's tables elsewhere name them)
+    posterior = page.split(held)[1].split("</table>")[0]
+    assert "<td>k_cb</td>" in posterior
+    assert "<td>k_fb</td>" not in posterior
+    assert "<td>d_fb</td>" not in posterior
+    # nor in the table of what the calibration answers (U, R, the parameters)
+    from bayescal.report.answer import quantities_table
+
+    rows = quantities_table(post, {}, lambda header, body: body)
+    names = [row[0] for row in rows]
+    assert "k_cb" in names
+    assert "k_fb" not in names
+
+
+def test_new_records_and_scenarios_run_with_the_held_ones_at_nominal(
+    reused: dict[str, Any], tmp_path: Path
+) -> None:
+    # The screening's simulator takes every parameter: the new record's runs and the
+    # scenarios' pass the screened-out ones at their nominal values (or the scenario's).
+    from bayescal.pipeline.newdata import predict_new
+    from bayescal.pipeline.scenario import run_scenarios
+
+    res = reused["results"]
+    record = reused["folder"] / "wall.csv"  # the days after the study's end: a new record
+    pred = predict_new(res, record, start=pd.Timestamp(END), method="simulator")
+    flux = pred.dataset["heat_flux_in_calibrated"].to_numpy()
+    assert np.isfinite(flux).any()
+    path = tmp_path / "boards.toml"
+    path.write_text("[scenarios.warmer_boards]\nset = { k_fb = 0.04 }\n", encoding="utf-8")
+    result = run_scenarios(res, path)
+    table = result.table
+    row = table[(table["summary"] == "mean") & (table["output"] == "heat_flux_in")].iloc[0]
+    # boards that conduct better change the mean inside flux, paired draw by draw
+    assert row["lower95"] > 0.0 or row["upper95"] < 0.0, row

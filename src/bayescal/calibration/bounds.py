@@ -100,7 +100,10 @@ def bound_leans(
     Returns
     -------
     tuple of BoundLean
-        In parameter order, lower bound before upper; empty where none leans.
+        In parameter order, lower bound before upper; empty where none leans. A
+        parameter whose draws are all one value was held there (``[design]
+        reuse_screening``'s screened-out inputs at a nominal value on a bound), not
+        calibrated: it does not lean.
     """
     u = np.asarray(unit_draws, dtype=float)
     if u.ndim == 0 or u.shape[-1] != len(names):
@@ -109,7 +112,7 @@ def bound_leans(
     found = []
     for k, name in enumerate(names):
         column = flat[:, k][np.isfinite(flat[:, k])]
-        if column.size == 0:
+        if column.size < 2 or np.ptp(column) == 0.0:  # none, or held at one value: not free
             continue
         for side, near in (("lower", column <= edge), ("upper", column >= 1.0 - edge)):
             fraction = float(np.mean(near))

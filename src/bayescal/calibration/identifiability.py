@@ -120,8 +120,7 @@ def identifiability(posterior: Posterior, seed: int = 0) -> Identifiability:
     draws, prior_sd, logs = _working_scale(posterior, seed)
     # coordinates held at a value (``[design] reuse_screening``'s screened-out inputs) are
     # not calibrated: the data neither fix them nor correlate them with the others
-    unit = posterior.unit_draws.reshape(-1, len(posterior.names))
-    moving = np.ptp(unit, axis=0) > 0.0
+    moving = np.array([n not in posterior.held_names for n in posterior.names])
     names = tuple(n for n, m in zip(posterior.names, moving, strict=True) if m)
     draws, prior_sd = draws[:, moving], prior_sd[moving]
     logs = [log for log, m in zip(logs, moving, strict=True) if m]

@@ -228,6 +228,13 @@ class Posterior:
         return self.diagnostics.warnings
 
     @property
+    def held_names(self) -> tuple[str, ...]:
+        """theta* coordinates at one value in every draw: held, not calibrated (``[design]
+        reuse_screening``'s screened-out inputs; every one for the catalogue model)."""
+        flat = self.unit_draws.reshape(-1, len(self.names))
+        return tuple(n for n, r in zip(self.names, np.ptp(flat, axis=0), strict=True) if r == 0)
+
+    @property
     def all_names(self) -> tuple[str, ...]:
         """``names`` then ``aux_names``."""
         return (*self.names, *self.aux_names)

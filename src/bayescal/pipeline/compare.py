@@ -556,17 +556,7 @@ def compare(
         )
         if sensors and res.posterior is not None:
             note(f"{label}: predicting the held-out sensors at posterior draws")
-            scored = ho.variant_held_out(res.context, res.posterior, sensors)
-            held.append((label, "calibrated", bool(failed), scored))
-            if k - 1 in sources and not any(m == "catalogue" for _, m, _, _ in held):
-                held.append(
-                    (
-                        sources[k - 1],
-                        "catalogue",
-                        False,
-                        ho.catalogue_held_out(res.context, sensors),
-                    )
-                )
+            held += _held_out(label, res, sensors, bool(failed), sources.get(k - 1), held)
         if k - 1 in sources:
             variants.append(
                 _catalogue(
@@ -595,6 +585,34 @@ def compare(
     order = {label: k for k, label in enumerate(table["variant"])}
     ranked = tuple(sorted(variants, key=lambda v: order[v.label]))
     return Comparison(ranked, table, periods, tuple(notes), files, tuple(loud), held_table)
+
+
+def _held_out(
+    label: str,
+    res: Results,
+    sensors: Sequence[str],
+    failed: bool,
+    catalogue: str | None,
+    done: Sequence[tuple[str, str, bool, dict[str, ho.HeldOutScore]]],
+) -> list[tuple[str, str, bool, dict[str, ho.HeldOutScore]]]:
+    """The variant's held-out scores, and its catalogue row's nominal run where it has one
+    and no catalogue row is scored yet (one nominal run, with the stated accuracy, does
+    not depend on the error model: the first variant's nominal values stand for the
+    catalogue); a simulator failure names the variant."""
+    assert res.posterior is not None  # the caller checks
+    try:
+        rows = [
+            (label, "calibrated", failed, ho.variant_held_out(res.context, res.posterior, sensors))
+        ]
+        if catalogue is not None and not any(model == "catalogue" for _, model, _, _ in done):
+            rows.append(
+                (catalogue, "catalogue", False, ho.catalogue_held_out(res.context, sensors))
+            )
+    except BayescalError as exc:
+        raise type(exc)(
+            f"{label}: predicting the held-out sensors failed: {exc.one_line()}"
+        ) from None
+    return rows
 
 
 def _catalogue(

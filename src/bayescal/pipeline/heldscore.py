@@ -173,9 +173,11 @@ def same_held_out_data(contexts: Sequence[tuple[str, Context]], names: Sequence[
             same = (va == vb) | (np.isnan(va) & np.isnan(vb))
             if not np.all(same):
                 k = int(np.flatnonzero(~same)[0])
+                when = str(np.datetime_as_string(ca.measured.times[idx[k]], unit="m"))
                 raise ConfigError(
                     f"cannot compare {la} and {lb}: the held-out sensor {name} differs in the "
-                    f"training periods (sample {k}: {va[k]:.6g} in {la}, {vb[k]:.6g} in {lb})",
+                    f"training periods (first at {when.replace('T', ' ')} UTC: {va[k]:.6g} in "
+                    f"{la}, {vb[k]:.6g} in {lb})",
                     hint="the variants of a comparison need the same data file and columns; "
                     "or leave the held-out sensors out of the comparison with --no-held-out",
                 )
@@ -287,6 +289,8 @@ def held_out_warnings(
                     f"variant {best_label} ({-diff:+.1f} ± {se:.1f} nats): {ABSORBS}"
                 )
             cat_rmse = s[name].rmse
+            if not cat_rmse > 0.0:  # the nominal run on the measurements: no ratio to take
+                continue
             worse = [
                 f"{v} {sv[name].rmse:.3g} ({100.0 * (sv[name].rmse / cat_rmse - 1.0):+.0f} %)"
                 for v, sv in calibrated

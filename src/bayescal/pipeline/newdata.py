@@ -483,7 +483,8 @@ def predict_as(
         No finished calibration, an output of ``other`` without a stated
         accuracy, no shared parameter, or draws outside ``other``'s bounds.
     """
-    from bayescal.config import build_simulator, nominal_parameters
+    from bayescal.config import nominal_parameters
+    from bayescal.pipeline.reuse import run_parameters, study_simulator
 
     tell = say or (lambda _: None)
     ctx = (
@@ -506,7 +507,7 @@ def predict_as(
             "the band of an output the calibration did not learn holds the sensor's accuracy",
         )
     names = list(posterior.names)
-    wanted = list(other.priors())
+    wanted = run_parameters(other)
     shared = [n for n in wanted if n in names]
     if not shared:
         raise ConfigError(
@@ -533,7 +534,7 @@ def predict_as(
     anchor = ctx.measured.times[int(layout.train_starts[0])]
     record = load_new_record(other, data or Path(other.data.file), anchor, start=start, end=end)
     other_ctx = dataclasses.replace(
-        ctx, study=other, simulator=build_simulator(other), measured=record
+        ctx, study=other, simulator=study_simulator(other), measured=record
     )
     notes = [
         f"the parameters {', '.join(shared)} from the posterior"

@@ -34,12 +34,13 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from bayescal.config import Study
+from bayescal.config import Study, build_simulator
 from bayescal.design import Design, Prior, latin_hypercube
 from bayescal.emulator.gp import LooResult
 from bayescal.errors import ConfigError
 from bayescal.pipeline.keys import derived_seed
 from bayescal.runner import RunResults
+from bayescal.simulators.base import Simulator
 from bayescal.store import screening as screening_store
 
 __all__ = [
@@ -47,8 +48,10 @@ __all__ = [
     "held_parameters",
     "nominal_accuracy",
     "reuse_design",
+    "run_parameters",
     "screening_design",
     "screening_rows",
+    "study_simulator",
 ]
 
 
@@ -90,6 +93,20 @@ def emulator_priors(study: Study) -> dict[str, Prior]:
     """The emulator's parameter inputs with ``reuse_screening``: every parameter, in study
     order (the screening's prior ranges)."""
     return study.screening_priors()
+
+
+def study_simulator(study: Study) -> Simulator:
+    """The simulator the study's runs are made with: with ``reuse_screening`` the
+    screening's (every parameter free: the reused runs' cache keys, and new runs, scenarios
+    and other records pass the screened-out ones at their nominal values), else the one
+    that holds the candidates at nominal."""
+    return build_simulator(study, screening=study.design.reuse_screening)
+
+
+def run_parameters(study: Study) -> list[str]:
+    """The parameters a run of :func:`study_simulator` takes: every one with
+    ``reuse_screening``, else the calibrated ones."""
+    return list(emulator_priors(study) if study.design.reuse_screening else study.priors())
 
 
 def _check_screening(study: Study, screening: Design) -> None:

@@ -43,12 +43,13 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import pandas as pd
 
-from bayescal.config import Study, build_simulator
+from bayescal.config import Study
 from bayescal.config.study import study_from_dict
 from bayescal.data.measured import MeasuredData, load_new_record
 from bayescal.errors import BayescalError, ConfigError, SimulatorError
 from bayescal.glossary import GLOSSARY
 from bayescal.pipeline.newdata import posterior_draws, runs_at
+from bayescal.pipeline.reuse import study_simulator
 
 if TYPE_CHECKING:
     from bayescal.pipeline.run import Results
@@ -250,7 +251,7 @@ def run_scenarios(
                 )
         changed = study_of(study, scenario, str(path))
         try:
-            simulator = build_simulator(changed)
+            simulator = study_simulator(changed)
         except BayescalError as exc:
             raise ConfigError(
                 f"[scenarios.{scenario.name}]: {exc.one_line()}",

@@ -28,7 +28,7 @@ import pandas as pd
 import xarray as xr
 
 from bayescal.calibration.posterior import Derived, Posterior, calibrate
-from bayescal.config import Study, build_simulator, nominal_parameters
+from bayescal.config import Study, nominal_parameters
 from bayescal.config.outputs import OutputError
 from bayescal.data.measured import MeasuredData, load_measured
 from bayescal.design import Design, Prior, latin_hypercube
@@ -50,7 +50,7 @@ from bayescal.pipeline.predict import (
     simulator_band,
     windows,
 )
-from bayescal.pipeline.reuse import emulator_priors, held_parameters, reuse_design
+from bayescal.pipeline.reuse import emulator_priors, held_parameters, reuse_design, study_simulator
 from bayescal.pipeline.simnoise import simulator_noise
 from bayescal.runner import Progress, RunResults, run_design
 from bayescal.simulators.base import Derivable, Simulator
@@ -167,7 +167,7 @@ def prepare(study: Study, options: Options | None = None) -> Context:
     measured = load_measured(study)
     # reused screening runs: the screening's simulator (every parameter free), whose
     # cache keys they have; new runs pass the nominal values of the screened-out ones
-    simulator = build_simulator(study, screening=study.design.reuse_screening)
+    simulator = study_simulator(study)
     out = study.root / study.study.output_dir
     ctx = Context(study, measured, simulator, out, options or Options())
     level_values(ctx, {n: measured.outputs[n] for n in ctx.transforms}, "measured")
@@ -551,7 +551,9 @@ def posterior_runs(
     lam_stars = posterior.lam_stars.reshape(theta.shape[0], -1)
     pick = np.unique(np.linspace(0, theta.shape[0] - 1, min(n, theta.shape[0])).astype(int))
     design = Design.from_values(ctx.priors, theta[pick])
-    res = simulate(ctx, design)
+    # as many successful runs as the calibrated parameters + 2 (reuse_screening's held
+    # inputs are in the design but not in the count)
+    res = simulate(ctx, design, need=len(ctx.study.calibrated) + 2)
     return res.outputs, lam_stars[pick][res.indices], pick[res.indices]
 
 

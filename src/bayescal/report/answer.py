@@ -137,9 +137,11 @@ def quantities_table(
     # what a physicist quotes first (U, R, heat capacity), then the parameters
     columns = [(name, d.draws, d.unit, d.description) for name, d in posterior.derived.items()]
     for k, name in enumerate(posterior.names):
+        if name in posterior.held_names:  # held at its nominal value, not calibrated
+            continue
         prior = posterior.priors[name]
         columns.append((name, posterior.draws[..., k], prior.unit, prior.description))
-    ident = identifiability(posterior)  # held parameters (not calibrated) have none: "–"
+    ident = identifiability(posterior)
     contraction = dict(zip(ident.names, ident.contraction, strict=True))
     tail = 50.0 * (1.0 - level)
     rows: list[list[object]] = []

@@ -128,10 +128,10 @@ def plot_posterior_histograms(
     pathlib.Path
         The PNG written.
     """
-    names = posterior.names
+    names, cols_kept = _calibrated(posterior)
     rows, cols = _grid(len(names))
     fig, axes = plt.subplots(rows, cols, figsize=(4.2 * cols, 3.2 * rows), squeeze=False)
-    main = posterior.draws.reshape(-1, len(names))
+    main = posterior.draws.reshape(-1, len(posterior.names))[:, cols_kept]
     extra = {} if discrepancy is None else _columns(discrepancy)
     for k, (ax, name) in enumerate(zip(axes.flat, names, strict=False)):
         prior = posterior.priors[name]
@@ -163,6 +163,14 @@ def plot_posterior_histograms(
     return save_figure(fig, path)
 
 
+def _calibrated(posterior: Posterior) -> tuple[list[str], list[int]]:
+    """theta*'s calibrated names and columns: the held ones (:attr:`Posterior.held_names`)
+    left out, unless every one is held."""
+    kept = [k for k, n in enumerate(posterior.names) if n not in posterior.held_names]
+    kept = kept or list(range(len(posterior.names)))
+    return [posterior.names[k] for k in kept], kept
+
+
 def _zoom(ax: Axes, draws: FloatArray, prior_width: float) -> None:
     """An inset with the posterior on its own scale when it is narrow against the prior."""
     q_lo, q_hi = np.percentile(draws, [0.5, 99.5])
@@ -191,8 +199,9 @@ def plot_traces(path: str | Path, posterior: Posterior) -> Path:
     pathlib.Path
         The PNG written.
     """
-    draws = posterior.all_draws()
-    names = posterior.all_names
+    kept = [k for k, n in enumerate(posterior.all_names) if n not in posterior.held_names]
+    draws = posterior.all_draws()[..., kept]
+    names = [posterior.all_names[k] for k in kept]
     n_chains, n_draws, _ = draws.shape
     fig, axes = plt.subplots(len(names), 1, figsize=(10, 1.7 * len(names)), sharex=True)
     axes = np.atleast_1d(axes)
@@ -224,9 +233,9 @@ def plot_pairs(path: str | Path, posterior: Posterior) -> Path:
     pathlib.Path
         The PNG written.
     """
-    names = posterior.names
+    names, cols_kept = _calibrated(posterior)
     t = len(names)
-    flat = posterior.draws.reshape(-1, t)
+    flat = posterior.draws.reshape(-1, len(posterior.names))[:, cols_kept]
     pick = _thin(flat.shape[0], 4000)
     size = max(2.2 * t, 4.0)
     fig, axes = plt.subplots(t, t, figsize=(size, size), squeeze=False)

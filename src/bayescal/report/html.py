@@ -528,7 +528,7 @@ def _ess(value: object) -> str:
 
 
 def _posterior_table(post: Posterior) -> str:
-    table = post.summary()
+    table = post.summary().drop(index=list(post.held_names))  # held: in the note above
     units = {name: prior.unit for name, prior in post.priors.items()}
     units |= {name: "1" for name in post.aux_names}
     units |= {
@@ -562,6 +562,8 @@ def _parameters(inputs: ReportInputs) -> str:
         "and of the measurement error (standardised units). R-hat should be ≤ 1.01 and "
         "both ESS ≥ 400. All draws: <code>posterior_draws.csv</code>.</p>"
     )
+    if held := ", ".join(inputs.posterior.held_names):
+        note += f'<p class="note">Held at their nominal values, not calibrated: {held}.</p>'
     return note + _posterior_table(inputs.posterior)
 
 
