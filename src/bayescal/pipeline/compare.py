@@ -188,10 +188,14 @@ def _when(times: np.ndarray, index: int) -> str:
 
 
 def same_training_data(
-    a: tuple[str, Context], b: tuple[str, Context], outputs: Sequence[str] | None = None
+    a: tuple[str, Context],
+    b: tuple[str, Context],
+    outputs: Sequence[str] | None = None,
+    held_out: Sequence[str] = (),
 ) -> None:
     """Refuse in one line unless ``b`` predicts exactly the training measurements of ``a``
-    (of the calibrated outputs they share, among ``outputs`` where given: those scored).
+    (of the calibrated outputs they share, among ``outputs`` where given: those scored;
+    and of the held-out sensors ``held_out`` both hold out, :mod:`bayescal.pipeline.heldscore`).
 
     Raises
     ------
@@ -201,17 +205,23 @@ def same_training_data(
         a shared output.
     """
     (la, ca), (lb, cb) = a, b
-    why = _first_difference(la, ca, lb, cb, outputs)
+    why = _first_difference(la, ca, lb, cb, outputs, held_out)
     if why is not None:
         raise ConfigError(
             f"cannot compare {la} and {lb}: {why}",
             hint="the variants of a comparison need the same data file, columns and training "
-            "periods, and at least one calibrated output in common",
+            "periods, and at least one calibrated output in common"
+            + ("; or leave the held-out sensors out with --no-held-out" if held_out else ""),
         )
 
 
 def _first_difference(
-    la: str, ca: Context, lb: str, cb: Context, outputs: Sequence[str] | None = None
+    la: str,
+    ca: Context,
+    lb: str,
+    cb: Context,
+    outputs: Sequence[str] | None = None,
+    held_out: Sequence[str] = (),
 ) -> str | None:
     oa, ob = ca.study.outputs.calibrate, cb.study.outputs.calibrate
     shared = [name for name in oa if name in ob and (outputs is None or name in outputs)]
@@ -232,14 +242,19 @@ def _first_difference(
             f"their training periods differ in time ({_when(ta, k)} UTC in {la}, "
             f"{_when(tb, k)} UTC in {lb})"
         )
-    for name in shared:
-        va = np.asarray(ca.measured.outputs[name], dtype=float)[idx_a]
-        vb = np.asarray(cb.measured.outputs[name], dtype=float)[idx_b]
+    series = [(f"the measured {n}", ca.measured.outputs[n], cb.measured.outputs[n]) for n in shared]
+    series += [
+        (f"the held-out sensor {n}", ca.measured.held_out[n], cb.measured.held_out[n])
+        for n in held_out
+    ]
+    for what, a, b in series:
+        va = np.asarray(a, dtype=float)[idx_a]
+        vb = np.asarray(b, dtype=float)[idx_b]
         same = (va == vb) | (np.isnan(va) & np.isnan(vb))
         if not np.all(same):
             k = int(np.flatnonzero(~same)[0])
             return (
-                f"the measured {name} differs in the training periods (first at "
+                f"{what} differs in the training periods (first at "
                 f"{_when(ta, k)} UTC: {va[k]:.6g} in {la}, {vb[k]:.6g} in {lb})"
             )
     return None
@@ -522,10 +537,9 @@ def compare(
     labels = _labels(studies)
     contexts = [(label, prepare(s, opts)) for label, s in zip(labels, studies, strict=True)]
     shared, on_notes = scored_on(labels, studies, on)
-    for other in contexts[1:]:
-        same_training_data(contexts[0], other, shared)
     sensors, held_notes = ho.shared_held_out(labels, studies) if held_out else ((), [])
-    ho.same_held_out_data(contexts, sensors)
+    for other in contexts[1:]:
+        same_training_data(contexts[0], other, shared, sensors)
     on_notes += held_notes
     for line in on_notes:
         note(line)

@@ -41,7 +41,6 @@ from scipy import special, stats
 from bayescal.calibration.cv import paired_difference
 from bayescal.calibration.posterior import Posterior
 from bayescal.config import Study
-from bayescal.errors import ConfigError
 from bayescal.periods import PeriodLayout
 from bayescal.pipeline.stages import Context, held_out_sd, nominal_run, posterior_runs
 from bayescal.report.trust import ABSORBS, NO_BETTER
@@ -51,7 +50,6 @@ __all__ = [
     "catalogue_held_out",
     "held_out_table",
     "held_out_warnings",
-    "same_held_out_data",
     "score_held_out",
     "shared_held_out",
     "variant_held_out",
@@ -157,30 +155,6 @@ def shared_held_out(
             "a sensor one variant calibrates on is no test of it"
         )
     return shared, notes
-
-
-def same_held_out_data(contexts: Sequence[tuple[str, Context]], names: Sequence[str]) -> None:
-    """Refuse in one line unless every variant has the same measurements of the held-out
-    sensors ``names`` on the training periods (their periods are already checked equal by
-    :func:`bayescal.pipeline.compare.same_training_data`)."""
-    (la, ca), rest = contexts[0], contexts[1:]
-    layout = ca.measured.layout
-    idx = (layout.train_starts[:, None] + np.arange(layout.period)).ravel()
-    for lb, cb in rest:
-        for name in names:
-            va = np.asarray(ca.measured.held_out[name], dtype=float)[idx]
-            vb = np.asarray(cb.measured.held_out[name], dtype=float)[idx]
-            same = (va == vb) | (np.isnan(va) & np.isnan(vb))
-            if not np.all(same):
-                k = int(np.flatnonzero(~same)[0])
-                when = str(np.datetime_as_string(ca.measured.times[idx[k]], unit="m"))
-                raise ConfigError(
-                    f"cannot compare {la} and {lb}: the held-out sensor {name} differs in the "
-                    f"training periods (first at {when.replace('T', ' ')} UTC: {va[k]:.6g} in "
-                    f"{la}, {vb[k]:.6g} in {lb})",
-                    hint="the variants of a comparison need the same data file and columns; "
-                    "or leave the held-out sensors out of the comparison with --no-held-out",
-                )
 
 
 def variant_held_out(
