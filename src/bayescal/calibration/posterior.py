@@ -532,12 +532,20 @@ def _holding(
         return None, None
     unknown = sorted(set(fixed) - set(priors))
     if unknown:
-        raise ConfigError(f"cannot hold {unknown}: the calibration has {list(priors)}")
+        raise ConfigError(
+            f"cannot hold {unknown}: the calibration has {list(priors)}",
+            hint="hold only parameters of the calibration",
+        )
     names = [name for name in priors if name in fixed]
     unit = np.array([float(priors[name].to_unit(fixed[name])) for name in names])
     outside = [name for name, u in zip(names, unit, strict=True) if not 0.0 <= u <= 1.0]
     if outside:
-        raise ConfigError(f"the held value of {outside[0]} lies outside its prior bounds")
+        p = priors[outside[0]]
+        raise ConfigError(
+            f"the held value {fixed[outside[0]]:g} of {outside[0]} lies outside its prior "
+            f"[{p.lower:g}, {p.upper:g}]",
+            hint="hold it at a value inside the prior's bounds",
+        )
     return unit, [list(priors).index(name) for name in names]
 
 
