@@ -243,7 +243,7 @@ def test_a_conductivity_that_rises_with_temperature_is_covered_or_flagged() -> N
     # the training days' mean surface temperatures), U and areal heat capacity are
     # covered, or the first screen says the model misses part of the measurements: at 8
     # of 10 truths or more (issue 35; with fewer truths, a quick check, the binomial
-    # floor). Measured at ten: R and U covered 9, the heat capacity 7, the warning shown
+    # floor). Measured at ten: R and U covered 8, the heat capacity 7, the warning shown
     # at 9, so covered or warned 10, 10 and 9.
     cases = results("conductivity")
     need = binomial_floor(len(cases)) if len(cases) < 10 else math.ceil(0.8 * len(cases))
