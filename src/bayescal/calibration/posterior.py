@@ -30,6 +30,7 @@ import os
 from collections.abc import Callable, Mapping, Sequence
 from contextlib import ExitStack
 from dataclasses import dataclass, field
+from functools import cached_property
 from pathlib import Path
 from tempfile import TemporaryDirectory
 from typing import TYPE_CHECKING, Literal
@@ -227,7 +228,7 @@ class Posterior:
         """Every diagnostic problem found (empty when all checks pass)."""
         return self.diagnostics.warnings
 
-    @property
+    @cached_property
     def held_names(self) -> tuple[str, ...]:
         """theta* coordinates at one value in every draw: held, not calibrated (``[design]
         reuse_screening``'s screened-out inputs; every one for the catalogue model)."""
