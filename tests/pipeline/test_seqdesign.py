@@ -22,7 +22,12 @@ from bayescal.config import load_study
 from bayescal.errors import ConfigError
 from bayescal.pipeline import Options, load_results, run
 from bayescal.pipeline.keys import stage_keys
-from bayescal.pipeline.seqdesign import HISTORY_FILE, STATE_FILE, shift_length
+from bayescal.pipeline.seqdesign import (
+    HISTORY_FILE,
+    STATE_FILE,
+    shift_in_posterior,
+    shift_length,
+)
 from bayescal.pipeline.stages import prepare
 from compare_study import STUDY
 from sequential_study import record
@@ -55,6 +60,28 @@ def test_shift_length_is_the_mahalanobis_length_of_the_least_squares_shift() -> 
         shift = np.linalg.solve(jac.T @ jac, jac.T @ e)  # the least-squares mean moves by this
         lengths.append(shift @ (jac.T @ jac) @ shift)  # posterior covariance (J'J)^-1
     assert shift_length(jac, errors) == pytest.approx(np.sqrt(np.mean(lengths)), rel=1e-10)
+
+
+def test_the_shift_is_measured_in_the_posteriors_own_covariance() -> None:
+    """The least-squares shift (J'J)^-1 J'e, its length in a given covariance: equal to
+    |P_J e| where the covariance is the white-noise one, and shorter in proportion where
+    AR(1) errors or a discrepancy make the posterior wider (dense reference, 1e-10)."""
+    rng = np.random.default_rng(1)
+    jac = rng.normal(size=(150, 3))
+    errors = rng.normal(scale=0.05, size=(4, 150))
+    white = np.linalg.inv(jac.T @ jac)
+    assert shift_in_posterior(jac, errors, white) == pytest.approx(
+        shift_length(jac, errors), rel=1e-10
+    )
+    a = rng.normal(size=(3, 3))
+    wide = white + a @ a.T  # a posterior wider than least squares, correlated
+    lengths = []
+    for e in errors:
+        shift = np.linalg.solve(jac.T @ jac, jac.T @ e)
+        lengths.append(shift @ np.linalg.solve(wide, shift))
+    found = shift_in_posterior(jac, errors, wide)
+    assert found == pytest.approx(np.sqrt(np.mean(lengths)), rel=1e-10)
+    assert found < shift_length(jac, errors)
 
 
 class _Killed(BaseException):

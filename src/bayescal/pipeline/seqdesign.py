@@ -20,8 +20,9 @@ et al. 2018, Sürer, Plumlee and Wild 2024):
    (the runs minus the predictions kept in 3, projected on the basis: the
    out-of-basis rest does not shrink with more runs) is turned into the shift
    it would cause in the posterior mean, in posterior SDs (:func:`posterior_shift`:
-   the Mahalanobis length ``|P_J e| / sigma`` of the least-squares shift, ``J``
-   the emulator's sensitivities at the posterior mean). The design stops when
+   the least-squares shift ``(J'J)^-1 J' e``, ``J`` the emulator's sensitivities at
+   the posterior mean, measured by its Mahalanobis length in the current
+   posterior's own covariance). The design stops when
    that shift is at most ``[design] tolerance``, after three batches without a
    smaller shift (the emulator's error floor: the GP's nugget), at
    ``max_runs`` runs, or once ``max_minutes`` have passed. Otherwise back to 2.
@@ -47,6 +48,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -73,6 +75,7 @@ __all__ = [
     "posterior_shift",
     "predict_runs",
     "sequential_design",
+    "shift_in_posterior",
     "shift_length",
 ]
 
@@ -217,35 +220,45 @@ def posterior_shift(
     noise: dict[str, float],
     mean: dict[str, float],
     sd: dict[str, float],
+    covariance: np.ndarray | None = None,
 ) -> float:
     """How far the emulator's measured error would move the posterior mean, in posterior SDs.
 
     With white noise of SD sigma and the model locally linear in theta, an
     error ``e`` of the emulator's mean shifts the least-squares (and, where the
-    data dominate the prior, the posterior) mean by ``(J'J)^-1 J' e``, whose
-    Mahalanobis length in the posterior's covariance ``sigma^2 (J'J)^-1`` is
-    ``|P_J e| / sigma``: the length of the error's projection on the span of
-    the outputs' sensitivities ``J = d eta / d theta``. ``J`` is the emulator's,
-    by central differences of half a posterior SD around the posterior mean,
-    over the training periods. Returns the root mean square over the batch
-    (NaN for an empty batch). AR(1) errors or a discrepancy make it an
-    approximation.
+    data dominate the prior, the posterior) mean by ``Delta = (J'J)^-1 J' e``,
+    ``J = d eta / d theta`` the outputs' sensitivities, each row over its noise
+    SD. ``J`` is the emulator's, by central differences of half a posterior SD
+    around the posterior mean, over the training periods. The shift is measured
+    by its Mahalanobis length in the current posterior's covariance
+    (``covariance``, physical units, over the parameters whose ``sd`` is above
+    zero, in the order of ``em.emulator.parameter_names``): AR(1) errors, a
+    discrepancy and the emulator's own variance widen the posterior beyond the
+    white-noise least squares' ``sigma^2 (J'J)^-1``, and the shift is judged
+    against the width the calibration actually has. Without ``covariance`` it
+    is ``sigma^2 (J'J)^-1`` and the length is ``|P_J e| / sigma``
+    (:func:`shift_length`). Parameters held fixed (``sd`` zero: ``[design]
+    reuse_screening``'s screened-out inputs) are left out of ``J``. Returns the
+    root mean square over the batch (NaN for an empty batch).
     """
     if not len(diffs):
         return float("nan")
     names = em.emulator.parameter_names
+    free = [j for j, n in enumerate(names) if _varies(sd.get(n, 0.0), mean[n])]
     scale = np.empty(diffs.shape[1])
     for name, sl in em.assembled.outputs.slices.items():
         scale[sl] = noise[name]
     center = np.array([mean[n] for n in names])
     cols = []
-    for j, name in enumerate(names):
+    for j in free:
         h = np.zeros_like(center)
-        h[j] = 0.5 * max(sd[name], 1e-12)
+        h[j] = 0.5 * sd[names[j]]
         up, down = predict_runs(em, np.vstack([center + h, center - h]))
         cols.append(((up - down) / scale[:, None]).ravel() / (2 * h[j]))
     errors = (diffs / scale[None, :, None]).reshape(len(diffs), -1)
-    return shift_length(np.column_stack(cols), errors)
+    if covariance is None:
+        return shift_length(np.column_stack(cols), errors)
+    return shift_in_posterior(np.column_stack(cols), errors, covariance)
 
 
 def shift_length(sensitivity: np.ndarray, errors: np.ndarray) -> float:
@@ -262,6 +275,34 @@ def shift_length(sensitivity: np.ndarray, errors: np.ndarray) -> float:
     q, _ = np.linalg.qr(np.asarray(sensitivity, dtype=float))
     e = np.atleast_2d(np.asarray(errors, dtype=float))
     return float(np.sqrt(np.mean(np.sum((e @ q) ** 2, axis=1))))
+
+
+def shift_in_posterior(
+    sensitivity: np.ndarray, errors: np.ndarray, covariance: np.ndarray
+) -> float:
+    """Root mean square over rows of the least-squares shift's length in ``covariance``.
+
+    Parameters
+    ----------
+    sensitivity
+        ``J`` ``(n, t)``: the outputs' derivatives in the parameters, each row
+        divided by its noise SD.
+    errors
+        ``(b, n)``: one error vector per row, divided by the noise SD likewise.
+    covariance
+        ``(t, t)``: the posterior's covariance of the parameters.
+
+    Returns
+    -------
+    ``sqrt(mean_b Delta_b' C^-1 Delta_b)`` with ``Delta_b = (J'J)^-1 J' e_b``.
+    """
+    jac = np.asarray(sensitivity, dtype=float)
+    e = np.atleast_2d(np.asarray(errors, dtype=float))
+    delta = np.linalg.lstsq(jac, e.T, rcond=None)[0]  # (t, b)
+    cov = np.atleast_2d(np.asarray(covariance, dtype=float))
+    chol = np.linalg.cholesky(cov + 1e-12 * np.diag(np.diag(cov)))
+    z = np.linalg.solve(chol, delta)
+    return float(np.sqrt(np.mean(np.sum(z**2, axis=0))))
 
 
 def _variance(em: EmulatorResult, unit: np.ndarray) -> np.ndarray:
@@ -323,6 +364,20 @@ def _posterior_summary(post: Posterior) -> tuple[dict[str, float], dict[str, flo
     )
 
 
+def _varies(sd: Any, mean: Any) -> Any:
+    """Whether a posterior SD is above rounding (a held parameter's is zero or ~1e-17)."""
+    return np.asarray(sd) > 1e-9 * (np.abs(mean) + 1e-300)
+
+
+def _free_covariance(post: Posterior, names: tuple[str, ...]) -> np.ndarray:
+    """The posterior's covariance over ``names`` that vary (not held fixed)."""
+    flat = post.draws.reshape(-1, len(post.names))
+    cols = [post.names.index(n) for n in names if n in post.names]
+    picked = flat[:, cols]
+    varying = _varies(picked.std(axis=0), picked.mean(axis=0))
+    return np.atleast_2d(np.cov(picked[:, varying], rowvar=False))
+
+
 @dataclass
 class _State:
     """What the loop has decided so far (written after each batch is chosen)."""
@@ -334,6 +389,7 @@ class _State:
     steps: list[Step]
     started: float  # seconds of design already spent before this process
     noise: dict[str, float] = dataclasses.field(default_factory=dict)  # at the newest batch
+    cov: np.ndarray | None = None  # the posterior's covariance when the newest batch was chosen
 
     def save(self, out: Path, outputs: tuple[str, ...], names: tuple[str, ...]) -> None:
         atomic_write_npz(
@@ -346,6 +402,7 @@ class _State:
                 "seconds": np.asarray(self.started),
                 "noise_names": np.asarray(list(self.noise), dtype=str),
                 "noise": np.asarray(list(self.noise.values()), dtype=float),
+                "cov": np.empty((0, 0)) if self.cov is None else self.cov,
             },
         )
         atomic_write_text(out / HISTORY_FILE, _history_csv(self.steps, outputs, names))
@@ -368,6 +425,7 @@ class _State:
                 steps,
                 float(data["seconds"]),
                 {str(n): float(v) for n, v in zip(data["noise_names"], data["noise"], strict=True)},
+                np.asarray(data["cov"], dtype=float) if "cov" in data else None,
             )
         except (OSError, ValueError, KeyError, DataError):
             return None
@@ -460,7 +518,8 @@ def sequential_design(ctx: Context, key: str, say: Say) -> tuple[Design, list[St
             diffs = batch_differences(em, state.predicted, batch_rows, sims)
             ratio = error_ratios(em, diffs, state.noise)
             last = state.steps[-1]
-            shift = posterior_shift(em, diffs, state.noise, last.mean, last.sd)
+            cov = state.cov if state.cov is not None and state.cov.size else None
+            shift = posterior_shift(em, diffs, state.noise, last.mean, last.sd, cov)
         done = bool(np.isfinite(shift)) and shift <= section.tolerance
         failed = [f.index for f in sims.failures]
         if failed:  # dropped: the runner would try them again at every step
@@ -512,6 +571,7 @@ def sequential_design(ctx: Context, key: str, say: Say) -> tuple[Design, list[St
         physical = em.assembled.theta_normaliser.invert(batch)
         state.predicted = predict_runs(em, physical)
         state.noise = noise
+        state.cov = _free_covariance(post, em.emulator.parameter_names)
         state.batch_start = len(state.unit)
         state.unit = np.vstack([state.unit, batch])
         state.started = time.perf_counter() - clock
