@@ -25,50 +25,13 @@ from bayescal.pipeline import Options, run
 from bayescal.pipeline.reuse import screening_design
 from bayescal.pipeline.screen import screen
 from bayescal.runner import sandbox
-from screen_study import CANDIDATES as SCREEN_CANDIDATES
-from sequential_study import END, TRUTH, write_study
+from reuse_study import NEW_RUNS, SCREENING_RUNS, SOBOL, Counting
+from reuse_study import reuse_study as _study
+from sequential_study import END, TRUTH
 
 pytest.importorskip("SALib", reason="Sobol screening needs SALib")
 
 SERIAL = Options(backend="serial", chains_backend="serial")
-EXECUTE = sandbox.execute
-SCREENING_RUNS = 12
-NEW_RUNS = 8
-# screen_study's candidates, the density over a range in which it matters a little
-CANDIDATES = SCREEN_CANDIDATES.replace(
-    "lower = 116.0, upper = 117.0", "lower = 110.0, upper = 125.0"
-)
-assert CANDIDATES != SCREEN_CANDIDATES
-SOBOL = f"""
-[screening]
-method = "sobol"
-runs = {SCREENING_RUNS}
-paths = 5
-saltelli = 256
-bootstrap = 50
-"""
-
-
-class Counting:
-    """``sandbox.execute`` that counts the simulator runs."""
-
-    def __init__(self) -> None:
-        self.calls = 0
-
-    def __call__(self, simulator: Any, forcing: Any, parameters: dict[str, float]) -> Any:
-        self.calls += 1
-        return EXECUTE(simulator, forcing, parameters)
-
-
-def _study(folder: Path, design: str = "reuse_screening = true\n", screening: str = SOBOL) -> Path:
-    """The virtual wall's study with the two candidates, ``[design]`` lines and ``screening``."""
-    write_study(folder, END)
-    path = folder / "study.toml"
-    text = path.read_text(encoding="utf-8")
-    assert f"[design]\nruns = {NEW_RUNS}\n" in text
-    text = text.replace(f"[design]\nruns = {NEW_RUNS}\n", f"[design]\nruns = {NEW_RUNS}\n{design}")
-    path.write_text(text + CANDIDATES + screening, encoding="utf-8")
-    return folder
 
 
 @pytest.fixture(scope="module")
@@ -199,8 +162,6 @@ def test_a_screening_with_other_settings_is_refused(tmp_path: Path) -> None:
         ("reuse_screening = true\n", "\n[screening]\ntrajectories = 4\n",
          r"design\.reuse_screening: only a Sobol screening's Latin hypercube can join the "
          r"design, and \[screening\] method is 'morris'.*set method = 'sobol'"),
-        ("reuse_screening = true\nsequential = true\n", SOBOL,
-         r"design\.reuse_screening: cannot be combined with \[design\] sequential = true"),
     ],
 )  # fmt: skip
 def test_impossible_combinations_are_one_line(

@@ -9,7 +9,8 @@ reached (:mod:`bayescal.pipeline.seqdesign`, docs/method.md section
 "Sequential design").
 
 ``reuse_screening = true`` puts the runs of a Sobol screening first in the
-design (:mod:`bayescal.pipeline.reuse`).
+design (:mod:`bayescal.pipeline.reuse`), one-shot or sequential (then the
+first design, and ``max_runs`` counts them).
 """
 
 from __future__ import annotations
@@ -30,10 +31,12 @@ class DesignSection(Section):
 
     runs: int = field_doc(
         "Number of runs R of the Latin hypercube (at least parameters + 2); with "
-        "sequential = true, the size of the first design.",
+        "sequential = true, the size of the first design. With reuse_screening, the new runs "
+        "after the screening's; with both, 0 makes the screening's runs alone the first "
+        "design.",
         30,
         default=30,
-        ge=2,
+        ge=0,
     )
     seed: int | None = field_doc(
         "Seed; derived from [study].seed if omitted.", 1, default=None, ge=0
@@ -46,7 +49,9 @@ class DesignSection(Section):
         "the emulator is least sure, instead of spreading every run over the prior box "
         "(docs/method.md, 'Sequential design'). Each batch refits the emulator and a short "
         "calibration; the runs are cached, and a killed design resumes after its last "
-        "finished batch.",
+        "finished batch. With reuse_screening, the first design is the screening's runs then "
+        "`runs` new ones, and the batches hold the screened-out candidates at their nominal "
+        "values, as the posterior does.",
         True,
         default=False,
     )
@@ -59,7 +64,9 @@ class DesignSection(Section):
     )
     max_runs: int | None = field_doc(
         "sequential: at most this many runs in all, the first design included (default: "
-        "three times runs).",
+        "three times runs). With reuse_screening the screening's runs count too (they are "
+        "not run again; the default is then the screening's runs + three times runs, so set "
+        "it with runs = 0).",
         90,
         default=None,
         ge=2,
@@ -91,7 +98,9 @@ class DesignSection(Section):
         "emulator's parameter inputs are then every parameter the screening varied, and the "
         "calibration and predictions hold the screened-out ones at their nominal values "
         "(they are not calibrated); the screening runs come from the run cache, not the "
-        "simulator. Not with a Morris screening, sequential = true, sampler 'nuts', "
+        "simulator. With sequential = true, the screening's runs and `runs` new ones are the "
+        "first design, the batches hold the screened-out candidates at nominal too, and "
+        "max_runs counts the screening's runs. Not with a Morris screening, sampler 'nuts', "
         "[discrepancy] enabled or [study] prior_from. Off by default: it changes the "
         "emulator's inputs (more of them, a longer training) and needs the screening's "
         "results in the output folder.",
@@ -114,6 +123,10 @@ class DesignSection(Section):
         """Runs per batch for ``parameters`` calibrated parameters."""
         return self.batch if self.batch is not None else max(4, 2 * parameters)
 
-    def run_cap(self) -> int:
-        """The most runs of a sequential design, the first design included."""
-        return self.max_runs if self.max_runs is not None else 3 * self.runs
+    def run_cap(self, reused: int = 0) -> int:
+        """The most runs of a sequential design, the first design included.
+
+        ``reused``: the screening's runs at the head of the design (``reuse_screening``),
+        which count against ``max_runs`` and its default (``reused + 3 * runs``).
+        """
+        return self.max_runs if self.max_runs is not None else reused + 3 * self.runs

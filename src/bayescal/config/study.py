@@ -378,18 +378,7 @@ class Study(Section):
         problems += reserved_name_problems(self.parameters, self.outputs.calibrate)
         problems += reserved_name_problems(self.derived, self.outputs.calibrate, "derived")
         problems += _sampler_problems(self) + _aggregate_problems(self) + _reuse_problems(self)
-        t = len(self.calibrated)
-        if t and self.design.runs < t + 2:
-            problems.append(
-                f"design.runs: {self.design.runs} runs for {t} "
-                f"{'calibrated ' if self.candidates else ''}parameters; "
-                f"at least {t + 2} are needed"
-            )
-        if self.design.sequential and self.design.run_cap() < self.design.runs:
-            problems.append(
-                f"design.max_runs: {self.design.run_cap()} is below design.runs "
-                f"({self.design.runs}), the first design of the sequential design"
-            )
+        problems += _design_problems(self)
         raise_problems(problems)
         return self
 
@@ -664,7 +653,6 @@ def _reuse_problems(study: Study) -> list[str]:
         "calibration.sampler = 'nuts'": study.calibration.sampler == "nuts",
         "[discrepancy] enabled": study.discrepancy.enabled,
         "[study] prior_from": study.study.prior_from is not None,
-        "[design] sequential = true": study.design.sequential,
     }
     return [
         f"{key}: cannot be combined with {what} (it does not hold the screened-out "
@@ -672,6 +660,41 @@ def _reuse_problems(study: Study) -> list[str]:
         for what, found in why.items()
         if found
     ]
+
+
+def _design_problems(study: Study) -> list[str]:
+    """``[design] runs`` and ``max_runs`` against the calibrated parameters (and, with
+    ``reuse_screening``, the screening's runs at the head of the design)."""
+    design = study.design
+    t = len(study.calibrated)
+    reuse = design.reuse_screening and study.screening.method == "sobol"
+    reused = study.screening.sobol_runs(len(study.parameters)) if reuse else 0
+    alone = reuse and design.sequential and design.runs == 0  # the screening's runs alone
+    problems = []
+    if not alone and design.runs < max(t + 2, 2):
+        with_zero = " (or 0 with sequential = true)" if reuse else ""
+        problems.append(
+            f"design.runs: {design.runs} runs for {t} "
+            f"{'calibrated ' if study.candidates else ''}parameters; "
+            f"at least {max(t + 2, 2)} are needed{with_zero}"
+        )
+    if not design.sequential:
+        return problems
+    cap = design.run_cap(reused)
+    if not reuse and cap < design.runs:
+        problems.append(
+            f"design.max_runs: {cap} is below design.runs "
+            f"({design.runs}), the first design of the sequential design"
+        )
+    first = reused + design.runs
+    if reuse and (cap < first or (alone and cap == first)):
+        problems.append(
+            f"design.max_runs: {cap} {'is below' if cap < first else 'leaves no batch after'} "
+            f"the first design's {first} runs (the screening's {reused} + design.runs "
+            f"{design.runs}): with reuse_screening it counts the screening's runs too; set it "
+            f"above {first}"
+        )
+    return problems
 
 
 def _sampler_problems(study: Study) -> list[str]:

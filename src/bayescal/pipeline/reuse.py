@@ -23,6 +23,14 @@ design instead of being thrown away:
   at the nominal screened-out values: the leave-one-run-out error of the new
   runs, apart from the screening's.
 
+With ``[design] sequential = true`` (:mod:`bayescal.pipeline.seqdesign`) the
+first design is that same design (the screening's runs, then ``[design] runs``
+new ones; ``runs = 0`` leaves the screening's runs alone), and every batch is
+chosen among the draws of a posterior that holds the screened-out inputs at
+nominal: its rows are over every emulator input, the screened-out ones at
+their nominal values (:func:`at_nominal`). ``max_runs`` counts the screening's
+runs, which are not run again.
+
 The simulator is the screening's (every parameter free,
 :func:`bayescal.config.build_simulator` with ``screening=True``), so that the
 screening runs' cache keys are found; a new run passes the nominal values
@@ -44,6 +52,7 @@ from bayescal.simulators.base import Simulator
 from bayescal.store import screening as screening_store
 
 __all__ = [
+    "at_nominal",
     "emulator_priors",
     "held_parameters",
     "nominal_accuracy",
@@ -159,13 +168,35 @@ def reuse_design(study: Study, new: Design) -> Design:
     screening = screening_design(study)
     _check_screening(study, screening)
     priors = emulator_priors(study)
-    unit = np.empty((new.runs, len(priors)))
-    for j, (name, prior) in enumerate(priors.items()):
+    unit = np.zeros((new.runs, len(priors)))
+    for j, name in enumerate(priors):
         if name in new.priors:
             unit[:, j] = new.unit[:, list(new.names).index(name)]
-        else:
-            unit[:, j] = float(prior.to_unit(study.parameters[name].nominal))
-    return Design(priors, np.vstack([screening.unit, unit]), seed=new.seed)
+    return Design(priors, np.vstack([screening.unit, at_nominal(study, unit)]), seed=new.seed)
+
+
+def at_nominal(study: Study, unit: np.ndarray) -> np.ndarray:
+    """Normalised rows over :func:`emulator_priors` with every screened-out candidate's
+    column set to its nominal value's normalised one (what the calibration holds it at).
+
+    The new runs of the design and the sequential design's batches; ``unit`` as it is
+    without ``reuse_screening`` (no column is held).
+
+    Parameters
+    ----------
+    study
+        The study.
+    unit
+        ``(b, t)`` normalised rows, ``t`` the emulator's parameter inputs.
+    """
+    rows = np.array(unit, dtype=float)
+    held = held_parameters(study)
+    if not held:
+        return rows
+    for j, (name, prior) in enumerate(emulator_priors(study).items()):
+        if name in held:
+            rows[:, j] = float(prior.to_unit(held[name]))
+    return rows
 
 
 def nominal_accuracy(

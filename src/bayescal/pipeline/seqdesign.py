@@ -31,6 +31,14 @@ The final design (every run that succeeded: a failed run is said, dropped from
 the design and not tried again) is the design stage's result; the later stages
 train the emulator and calibrate on it with the study's full settings.
 
+With ``[design] reuse_screening = true`` (:mod:`bayescal.pipeline.reuse`) the
+first design is the one-shot design of reuse: the Sobol screening's runs (from
+the run cache) then ``[design] runs`` new ones (none with ``runs = 0``); the
+emulator's inputs are every parameter, the posterior holds the screened-out ones
+at their nominal values, and so does every batch (its rows over every input, the
+screened-out ones at their nominal value). ``max_runs`` counts the screening's
+runs, the batch's default size the calibrated parameters.
+
 The loop's state is written atomically to ``OUTPUT_DIR/sequential/state.npz``
 after each batch is chosen: a killed design resumes with the batch it was
 running (its finished runs come from the run cache), and never chooses a batch
@@ -56,11 +64,13 @@ from bayescal.atomic import atomic_write_npz, atomic_write_text, read_npz
 from bayescal.calibration.posterior import Posterior
 from bayescal.design import Design, latin_hypercube
 from bayescal.errors import ConfigError, DataError
+from bayescal.pipeline.reuse import at_nominal, screening_rows
 from bayescal.pipeline.stages import (
     Context,
     EmulatorResult,
     build_emulator,
     calibrate_stage,
+    make_design,
     simulate,
 )
 from bayescal.runner import RunResults
@@ -319,6 +329,10 @@ def choose_batch(
 ) -> np.ndarray:
     """``size`` normalised parameter sets among the posterior's draws (module docstring).
 
+    The spread is measured over the coordinates the posterior samples: one it holds at
+    a value (``reuse_screening``'s screened-out inputs) is left out, so that a run with
+    other values of those (a screening run) is near a draw with its sampled values.
+
     Parameters
     ----------
     em
@@ -339,9 +353,12 @@ def choose_batch(
     var = _variance(em, cand)
     keep = var >= np.median(var)
     cand, var = cand[keep], var[keep]
-    scale = np.maximum(draws.std(axis=0), 1e-9)
-    z_cand = cand / scale
-    z_old = np.asarray(existing, dtype=float) / scale
+    free = np.ptp(draws, axis=0) > 0.0  # not held at one value
+    if not free.any():
+        free[:] = True
+    scale = np.maximum(draws[:, free].std(axis=0), 1e-9)
+    z_cand = cand[:, free] / scale
+    z_old = np.asarray(existing, dtype=float).reshape(-1, len(free))[:, free] / scale
     near = (
         np.min(np.linalg.norm(z_cand[:, None, :] - z_old[None, :, :], axis=2), axis=1)
         if len(z_old)
@@ -491,13 +508,17 @@ def sequential_design(ctx: Context, key: str, say: Say) -> tuple[Design, list[St
     priors = ctx.priors
     names = tuple(priors)
     seed = ctx.seed("design", section.seed)
-    cap = section.run_cap()
-    size = section.batch_size(len(names))
+    cap = section.run_cap(screening_rows(ctx.study))  # the screening's runs count
+    size = section.batch_size(len(ctx.study.calibrated))
     quick = _quick(ctx)
     state = _State.load(ctx.out, key)
     if state is None:
-        first = latin_hypercube(
-            priors, section.runs, seed, None if section.optimization == "none" else "random-cd"
+        first = (
+            make_design(ctx)  # the screening's runs, then the new ones (reuse's design)
+            if section.reuse_screening
+            else latin_hypercube(
+                priors, section.runs, seed, None if section.optimization == "none" else "random-cd"
+            )
         )
         state = _State(key, first.unit, len(first.unit), np.empty((0,)), [], 0.0)
     else:
@@ -568,6 +589,7 @@ def sequential_design(ctx: Context, key: str, say: Say) -> tuple[Design, list[St
         batch = choose_batch(
             em, post, state.unit, min(size, cap - len(state.unit)), seed + len(state.steps)
         )
+        batch = at_nominal(ctx.study, batch)  # the screened-out inputs exactly at nominal
         physical = em.assembled.theta_normaliser.invert(batch)
         state.predicted = predict_runs(em, physical)
         state.noise = noise

@@ -204,14 +204,20 @@ def level_values(
 def make_design(ctx: Context) -> Design:
     """The Latin hypercube of ``[design]`` over the priors' bounds; with ``reuse_screening``
     the screening's runs, then that hypercube over the calibrated parameters
-    (:func:`bayescal.pipeline.reuse.reuse_design`)."""
+    (:func:`bayescal.pipeline.reuse.reuse_design`; none with ``runs = 0``, which the
+    configuration allows with ``sequential`` only: the sequential design's first design)."""
     section = ctx.study.design
     optimization = None if section.optimization == "none" else section.optimization
     seed = ctx.seed("design", section.seed)
     if not section.reuse_screening:
         return latin_hypercube(ctx.priors, section.runs, seed, optimization)
     calibrated = {name: ctx.priors[name] for name in ctx.study.calibrated}
-    return reuse_design(ctx.study, latin_hypercube(calibrated, section.runs, seed, optimization))
+    new = (
+        latin_hypercube(calibrated, section.runs, seed, optimization)
+        if section.runs
+        else Design(calibrated, np.empty((0, len(calibrated))), seed=seed)
+    )
+    return reuse_design(ctx.study, new)
 
 
 def _runner_options(ctx: Context) -> dict[str, Any]:
