@@ -24,7 +24,12 @@ from bayescal.pipeline import Options, run
 from bayescal.pipeline.keys import stage_keys
 from bayescal.pipeline.reuse import screening_design
 from bayescal.pipeline.screen import screen
-from bayescal.pipeline.seqdesign import HISTORY_FILE, STATE_FILE
+from bayescal.pipeline.seqdesign import (
+    HISTORY_FILE,
+    STATE_FILE,
+    posterior_shift,
+    predict_runs,
+)
 from bayescal.pipeline.stages import make_design, prepare
 from bayescal.runner import sandbox
 from reuse_study import EXECUTE, SCREENING_RUNS, SOBOL, Counting, reuse_study
@@ -211,3 +216,32 @@ def test_the_design_key_follows_the_screening_and_the_sequential_settings(
     reseeded = key("c", "reuse_screening = true\nsequential = true\n", SOBOL + "seed = 3\n")
     plain = key("d", "sequential = true\n")
     assert len({one_shot, sequential, reseeded, plain}) == 4
+
+
+def test_the_steps_leave_the_held_inputs_out_of_the_shift_and_the_line(
+    grown: dict[str, Any],
+) -> None:
+    """The held inputs' posterior SD is rounding (~1e-16): neither printed with the
+    posterior nor differentiated in the stopping rule's shift."""
+    steps = [s for s in grown["said"] if s.startswith("design: ") and "; posterior " in s]
+    assert steps
+    for line in steps:
+        tail = line.split("; posterior ", 1)[1]
+        assert "k_cb" in tail
+        assert "cp_cb" in tail
+        assert "k_fb" not in tail
+        assert "d_fb" not in tail
+    em = grown["predict"].emulator
+    names = em.emulator.parameter_names
+    mean = {n: float(v) for n, v in zip(names, grown["predict"].design.values[-1], strict=True)}
+    noise = {o: 1.0 for o in em.emulator.outputs.names}
+    diffs = 0.01 * np.random.default_rng(0).normal(size=predict_runs(em, mean_row(mean)).shape)
+    rounding = {n: (1e-3 * abs(mean[n]) if n in ("k_cb", "cp_cb") else 1e-16) for n in names}
+    exact = {n: (rounding[n] if n in ("k_cb", "cp_cb") else 0.0) for n in names}
+    assert posterior_shift(em, diffs, noise, mean, rounding) == pytest.approx(
+        posterior_shift(em, diffs, noise, mean, exact), rel=1e-12
+    )
+
+
+def mean_row(mean: dict[str, float]) -> np.ndarray:
+    return np.array([list(mean.values())])

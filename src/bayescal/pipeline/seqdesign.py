@@ -610,6 +610,8 @@ def _step_line(step: Step, tolerance: float, names: tuple[str, ...]) -> str:
         )
     if step.mean:
         text += "; posterior " + ", ".join(
-            f"{n} {step.mean[n]:.4g} ± {step.sd[n]:.2g}" for n in names
+            f"{n} {step.mean[n]:.4g} ± {step.sd[n]:.2g}"
+            for n in names
+            if _varies(step.sd[n], step.mean[n])  # not the held-fixed ones
         )
     return text
