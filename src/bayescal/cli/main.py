@@ -474,6 +474,14 @@ def predict(
     help="Use the data up to this instant, exclusive (local time of the data) "
     "[default: the file's end].",
 )
+@click.option(
+    "--warmup",
+    default=None,
+    metavar="all|study|DURATION",
+    help="How much of the record before the new days is simulated, not compared: 'all' "
+    "(from the first study's start: the state of one calibration on every day), 'study' "
+    "(the study's warm-up) or a duration such as 3D [default: all; with --data, study].",
+)
 @simulation_options
 @click.option("--quiet", "-q", is_flag=True, help="No progress bars or notes; errors only.")
 @user_errors
@@ -481,6 +489,7 @@ def update(
     study: Path,
     data: Path | None,
     end: str | None,
+    warmup: str | None,
     jobs: int | None,
     backend: str | None,
     scheduler: str | None,
@@ -489,7 +498,7 @@ def update(
     """Add newly arrived data to a finished calibration (a sequential calibration).
 
     Writes update-00K.toml beside the study file: the study's settings on the
-    record from its test window (less one warm-up) to the end of the data,
+    record from its test window (less --warmup) to the end of the data,
     with the previous posterior as the prior of its parameters ([study]
     prior_from), and runs it into OUTPUT_DIR/update-00K. Its simulator runs are
     made again (runs are tied to their boundary conditions; one line says why);
@@ -516,9 +525,25 @@ def update(
             ) from None
     if data is not None and not data.is_file():
         raise ConfigError(f"{data}: no such data file", hint="give --data an existing file")
+    span: str | pd.Timedelta | None = warmup
+    if warmup is not None and warmup not in ("all", "study"):
+        try:
+            span = pd.Timedelta(warmup)
+        except ValueError:
+            span = None
+        if span is None or span <= pd.Timedelta(0):
+            raise ConfigError(
+                f"--warmup {warmup!r} is neither 'all', 'study' nor a positive duration",
+                hint="e.g. --warmup all, --warmup 3D or --warmup 36h",
+            )
     options = Options(backend=backend, jobs=jobs, scheduler=scheduler, **progress_options(quiet))
     result = run_update(
-        config, data=data, end=stop, options=options, say=(lambda _: None) if quiet else click.echo
+        config,
+        data=data,
+        end=stop,
+        options=options,
+        say=(lambda _: None) if quiet else click.echo,
+        warmup=span,
     )
     columns = [c for c in result.history.columns if c.endswith(("_mean", "_lower", "_upper"))]
     shown = result.history[["update", "last_training", "training_periods", *columns]]

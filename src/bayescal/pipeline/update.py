@@ -24,6 +24,7 @@ from bayescal.store.stages import StageLog
 __all__ = [
     "HISTORY_FILE",
     "UPDATE_PATTERN",
+    "WARMUPS",
     "Update",
     "reuse_runs",
     "runs_line",
@@ -69,18 +70,34 @@ def _local(instant: np.datetime64, zone: Any) -> str:
     return pd.Timestamp(instant).tz_localize("UTC").tz_convert(zone).strftime("%Y-%m-%dT%H:%M:%S")
 
 
+#: ``warmup`` of :func:`update`: the record from the first study's start, or the study's
+#: own warm-up before the previous test window.
+WARMUPS = ("all", "study")
+
+
 def _update_raw(
-    previous: Study, base: Study, k: int, data: Path | None, end: pd.Timestamp | None
+    previous: Study,
+    base: Study,
+    k: int,
+    data: Path | None,
+    end: pd.Timestamp | None,
+    warmup: str | pd.Timedelta = "study",
 ) -> dict[str, Any]:
     """The study dictionary of update ``k``: the previous study's, on the record from its
-    test window (less one warm-up) to ``end``, with the previous posterior as prior."""
+    test window (less ``warmup``: :func:`update`) to ``end``, with the previous posterior
+    as prior."""
     from bayescal.data.measured import load_measured
 
     measured = load_measured(previous)
     layout = measured.layout
-    warmup = pd.Timedelta(measured.step, "s") * layout.warmup
-    first = measured.times[min(layout.test_begin, layout.n_total - 1)]
-    start_utc = pd.Timestamp(first) - warmup
+    first = pd.Timestamp(measured.times[min(layout.test_begin, layout.n_total - 1)])
+    if warmup == "all":
+        span = first - pd.Timestamp(load_measured(base).times[0])
+    elif warmup == "study":
+        span = pd.Timedelta(measured.step, "s") * layout.warmup
+    else:
+        span = pd.Timedelta(warmup)
+    start_utc = first - span
     assert previous.path is not None
     raw = tomllib.loads(Path(previous.path).read_text(encoding="utf-8"))
     section = raw.setdefault("data", {})
@@ -100,6 +117,7 @@ def _update_raw(
     ]
     if not section["exclude"]:
         section.pop("exclude")
+    raw.setdefault("periods", {})["warmup"] = f"{int(span.total_seconds() // 60)}min"
     meta = raw.setdefault("study", {})
     meta["prior_from"] = Path(previous.path).name
     base_raw = tomllib.loads(Path(base.path or "").read_text(encoding="utf-8")).get("study", {})
@@ -114,9 +132,10 @@ def runs_line(previous: Study, changed: Study) -> str:
     A run is cached by the simulator, its parameter values and the boundary
     conditions it was driven by (:func:`bayescal.runner.run_key`), and a study's
     boundary conditions are its record, cut by ``data.start`` and ``data.end``:
-    an update starts later (at the previous test window, less one warm-up) and
-    ends later, so its runs are made again. Were the two forcings the same (same
-    simulator, same boundary conditions), the update's run cache would find the
+    an update ends later (and, with a warm-up shorter than the record before the
+    previous test window, starts later), so its runs are made again. Were the two
+    forcings the same (same simulator, same boundary conditions), the update's run
+    cache would find the
     previous runs once they are linked into its output folder
     (:func:`reuse_runs`).
     """
@@ -272,16 +291,28 @@ def update(
     end: pd.Timestamp | None = None,
     options: Any = None,
     say: Callable[[str], None] | None = None,
+    warmup: str | pd.Timedelta | None = None,
 ) -> Update:
     """Add newly arrived data to a finished study: a sequential calibration.
 
     The latest finished calibration (the study, or its last update) is the
     previous one. Update ``k`` is the study file ``update-00k.toml`` beside the
     study's: the previous study's settings on the record from the previous
-    test window (less one warm-up; the test window was never trained on) to
-    ``end`` (default: the end of the file, ``data`` or the study's own), with
-    ``[study] prior_from`` the previous study, written into
-    ``OUTPUT_DIR/update-00k``. Its simulator runs are made again (runs are
+    test window (the test window was never trained on) to ``end`` (default: the
+    end of the file, ``data`` or the study's own), with ``[study] prior_from``
+    the previous study, written into ``OUTPUT_DIR/update-00k``.
+
+    ``warmup`` is how much of the record before the previous test window is
+    simulated without being compared (the update's ``[periods] warmup``):
+    ``"all"`` (the default without ``data``) from the first study's start, so
+    that the simulated state at the new days is that of one calibration on
+    every day (a heavy wall remembers more than a day: on the 14-day virtual
+    wall the study's one-day warm-up moved the update's mean conductivity 1.2
+    posterior SD from one calibration on all the days, the whole record 0.1 SD;
+    docs/validation/case-studies-log.md); ``"study"`` (the default with
+    ``data``, a file that need not hold the earlier days) the study's own
+    warm-up; or a duration, a multiple of the data step. A longer warm-up
+    lengthens every simulator run of the update. Its simulator runs are made again (runs are
     cached by their boundary conditions, and the record is new: one line says
     so, :func:`runs_line`); its calibration chains start from the previous
     posterior's draws (:func:`bayescal.pipeline.sequential.warm_starts`) with
@@ -314,7 +345,9 @@ def update(
         previous = candidate
     # the update after the last finished one (an unfinished one is made again)
     k = 1 if previous is study else files.index(Path(previous.path or "")) + 2
-    raw = _update_raw(previous, study, k, data, end)
+    if warmup is None:
+        warmup = "study" if data is not None else "all"
+    raw = _update_raw(previous, study, k, data, end, warmup)
     path = Path(study.path or "").parent / UPDATE_PATTERN.format(k)
     changed = study_from_dict(raw, root=study.root, source=str(path))
     text = (
@@ -324,7 +357,8 @@ def update(
     atomic_write_text(path, text + tomli_w.dumps(raw))
     changed = load_study(path)
     tell(
-        f"update {k}: the record from {raw['data']['start']} on, with the posterior of "
+        f"update {k}: the record from {raw['data']['start']} on (warm-up "
+        f"{raw['periods']['warmup']}: {warmup}), with the posterior of "
         f"{Path(previous.path or '').name} as prior; the calibration chains start from its "
         f"draws; burn-in kept at {changed.calibration.burn} sweeps (a warm start was measured "
         "not to converge sooner: the burn-in adapts the proposal widths)"
