@@ -4,9 +4,10 @@ The tiny virtual-wall study of ``test_seqdesign`` (8 design runs, two basis
 vectors): its emulator's weights miss the held-out runs' part on the basis by
 about 0.1 noise SD on the test window (measured), so a tolerance below that takes
 the simulator route, and one above it (the default 0.3 included) the emulator
-route, making only the held-out runs. (Compared with the whole runs, off-basis
-part included, the error read about 1 noise SD and the default took the
-simulator route: the emulator route's band holds that part apart.)
+route, making only the held-out runs. Compared with the whole runs, off-basis
+part included, the emulator route's centre misses them by about 1 noise SD: the
+band holds that part apart, and the run warns that the route's point metrics
+are worse than the simulator route's.
 """
 
 from __future__ import annotations
@@ -58,6 +59,7 @@ def test_an_error_above_the_tolerance_takes_the_simulator_route_reusing_the_held
     assert res.predictions is not None
     assert res.predictions.dataset.attrs["route"] == "simulator"
     assert cached == 8 + 1 + RUNS  # design, nominal, the route's runs (the check's among them)
+    assert not [s for s in said if "off the output basis" in s]  # the simulator's centre
 
 
 def test_a_tolerance_above_the_measured_error_takes_the_emulator_route(
@@ -71,6 +73,11 @@ def test_a_tolerance_above_the_measured_error_takes_the_emulator_route(
     assert res.predictions is not None
     assert res.predictions.dataset.attrs["route"] == "emulator"
     assert cached == 8 + 1 + CHECK  # only the held-out runs were made
+    # its centre leaves out the runs' part off the basis (about 1 noise SD here): said
+    (warning,) = [s for s in said if "leaves out the runs' part off the output basis" in s]
+    assert warning.startswith("WARNING: ")
+    centre = float(warning.split("heat_flux_in ")[1].split(" x")[0])
+    assert centre > max(2 * measured, 0.3) > measured
 
 
 def test_the_held_out_draws_are_among_the_simulator_routes_draws(

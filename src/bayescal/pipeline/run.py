@@ -480,6 +480,9 @@ def _predictions(
     if r.ctx.study.predict.method == "auto":
         check = check_route(r.ctx, em, post)
         r._note(check.line())
+        if (text := check.warning()) is not None:
+            r.logger.warning("predict: %s", text)
+            r.say(f"WARNING: {text}")
         route = check.route
     pred = predict_stage(r.ctx, em, post, disc, nominal_run(r.ctx), method=route)
     files = predictions_store.save_predictions(r.out, pred.dataset, pred.metrics)
