@@ -24,7 +24,9 @@ Usage::
 ``--few-runs`` switches to issue 36's settings (Sobol screening on 42 runs, fewer
 design runs); with ``--reuse`` the screening's runs join the design (``[design]
 reuse_screening = true``) and, without ``--design-runs``, the new runs are set from the
-screening: 10 per calibrated parameter in all, the screening's counted.
+screening: 10 per calibrated parameter in all, the screening's counted; with
+``--reuse --sequential`` the screening's runs and 12 new ones are the first design of a
+sequential design (batches of 12, at most 10 runs per calibrated parameter in all).
 
 Running it again reuses the cached EnergyPlus runs and every finished stage;
 ``--fresh`` starts from an empty folder.
@@ -105,11 +107,16 @@ def guideline14(study_dir: Path) -> pd.DataFrame:
 
 
 def _few_runs(
-    path: Path, max_parameters: int = 8, design_runs: int | None = None, reuse: bool = False
+    path: Path,
+    max_parameters: int = 8,
+    design_runs: int | None = None,
+    reuse: bool = False,
+    sequential: bool = False,
 ) -> None:
     """Switch a fresh copy of the office study to the settings of ``--few-runs``
     (``design_runs``: a one-shot design of that many runs instead of the sequential one;
-    ``reuse``: a one-shot design after the screening's runs, ``[design] reuse_screening``)."""
+    ``reuse``: a one-shot design after the screening's runs, ``[design] reuse_screening``;
+    ``reuse`` and ``sequential``: the screening's runs, then a sequential design)."""
     data = tomllib.loads(path.read_text(encoding="utf-8"))
     data["screening"] = {
         "method": "sobol",
@@ -125,6 +132,15 @@ def _few_runs(
     )
     if reuse:
         data["design"]["reuse_screening"] = True
+    if reuse and sequential:
+        # the screening's 42 runs and 12 new ones first, batches of 12, at most the
+        # one-shot reuse design's 10 runs per calibrated parameter (90 for nine)
+        data["design"] |= {
+            "runs": 12,
+            "sequential": True,
+            "batch": 12,
+            "max_runs": 10 * max_parameters,
+        }
     data["predict"] = {**data["predict"], "method": "auto"}
     path.write_text(tomli_w.dumps(data), encoding="utf-8")
 
@@ -176,20 +192,34 @@ def main(argv: list[str] | None = None) -> int:
         "screening's runs; without --design-runs its new runs are 10 x the calibrated "
         "parameters minus the screening's runs (at least parameters + 2)",
     )
+    parser.add_argument(
+        "--sequential",
+        action="store_true",
+        help="--few-runs --reuse: the screening's runs and 12 new ones, then a sequential "
+        "design in batches of 12 up to 10 x the calibrated parameters in all",
+    )
     args = parser.parse_args(argv)
+    if args.sequential and not (args.few_runs and args.reuse and args.design_runs is None):
+        parser.error("--sequential needs --few-runs --reuse and no --design-runs")
     folder: Path = args.out
     if args.fresh and folder.exists():
         shutil.rmtree(folder)
     if not (folder / "study.toml").is_file():
         copy_example("office", folder)
         if args.few_runs:
-            _few_runs(folder / "study.toml", args.max_parameters, args.design_runs, args.reuse)
+            _few_runs(
+                folder / "study.toml",
+                args.max_parameters,
+                args.design_runs,
+                args.reuse,
+                args.sequential,
+            )
     options = Options(backend=args.backend, jobs=args.jobs, scheduler=args.scheduler)
     start = time.perf_counter()
     screened = screen(load_study(folder), options=options, apply=True, say=print)
     print(screening_text(screened.indices, screened.proposal))
     print(f"screening: {screened.seconds:.1f} s ({screened.runs.n_run} EnergyPlus runs)")
-    if args.few_runs and args.reuse and args.design_runs is None:
+    if args.few_runs and args.reuse and args.design_runs is None and not args.sequential:
         _reuse_runs(folder / "study.toml", screened.design.runs)
     res = run(load_study(folder), until="report", options=options, say=print)
     total = time.perf_counter() - start
