@@ -63,9 +63,10 @@ def test_shift_length_is_the_mahalanobis_length_of_the_least_squares_shift() -> 
 
 
 def test_the_shift_is_measured_in_the_posteriors_own_covariance() -> None:
-    """The least-squares shift (J'J)^-1 J'e, its length in a given covariance: equal to
-    |P_J e| where the covariance is the white-noise one, and shorter in proportion where
-    AR(1) errors or a discrepancy make the posterior wider (dense reference, 1e-10)."""
+    """Dense references (1e-10): where the posterior is the white-noise least squares'
+    the shift is |P_J e|; where AR(1) errors or a discrepancy make it s^2 times wider,
+    the least-squares shift over s; with a prior holding a direction the data hardly
+    inform, the Bayesian shift C J'e / s^2, bounded where the least-squares one is not."""
     rng = np.random.default_rng(1)
     jac = rng.normal(size=(150, 3))
     errors = rng.normal(scale=0.05, size=(4, 150))
@@ -73,15 +74,22 @@ def test_the_shift_is_measured_in_the_posteriors_own_covariance() -> None:
     assert shift_in_posterior(jac, errors, white) == pytest.approx(
         shift_length(jac, errors), rel=1e-10
     )
-    a = rng.normal(size=(3, 3))
-    wide = white + a @ a.T  # a posterior wider than least squares, correlated
+    assert shift_in_posterior(jac, errors, 9.0 * white) == pytest.approx(
+        shift_length(jac, errors) / 3.0, rel=1e-10
+    )
+    # the third parameter hardly informed (sensitivity x 1e-3), its prior SD 1
+    weak = jac * np.array([1.0, 1.0, 1e-3])
+    prior = np.diag([0.0, 0.0, 1.0])
+    cov = np.linalg.inv(weak.T @ weak + prior)
     lengths = []
     for e in errors:
-        shift = np.linalg.solve(jac.T @ jac, jac.T @ e)
-        lengths.append(shift @ np.linalg.solve(wide, shift))
-    found = shift_in_posterior(jac, errors, wide)
-    assert found == pytest.approx(np.sqrt(np.mean(lengths)), rel=1e-10)
-    assert found < shift_length(jac, errors)
+        shift = cov @ weak.T @ e  # the Bayesian shift (s^2 = 1 here: C^-1 - J'J = P)
+        lengths.append(shift @ np.linalg.solve(cov, shift))
+    found = shift_in_posterior(weak, errors, cov)
+    assert found == pytest.approx(np.sqrt(np.mean(lengths)), rel=1e-8)
+    least_squares = np.linalg.lstsq(weak, errors.T, rcond=None)[0]
+    ls_length = np.sqrt(np.mean(np.sum(least_squares * np.linalg.solve(cov, least_squares), 0)))
+    assert found < ls_length / 10  # the least-squares shift grows as 1 / sensitivity
 
 
 class _Killed(BaseException):

@@ -290,7 +290,18 @@ def shift_length(sensitivity: np.ndarray, errors: np.ndarray) -> float:
 def shift_in_posterior(
     sensitivity: np.ndarray, errors: np.ndarray, covariance: np.ndarray
 ) -> float:
-    """Root mean square over rows of the least-squares shift's length in ``covariance``.
+    """Root mean square over rows of the posterior mean's shift, in the posterior's SDs.
+
+    The posterior is read as a Gaussian likelihood of precision ``J'J / s^2``
+    (white errors whose variance the calibration's error model inflates by
+    ``s^2``: AR(1) errors, a discrepancy, the emulator's variance) times a prior
+    that holds what the data leave open, ``C^-1 = J'J / s^2 + P``. ``s^2`` is the
+    smallest inflation that leaves ``P`` positive semi-definite, the largest
+    eigenvalue of ``L' J'J L`` (``C = L L'``). An error ``e`` then moves the mean
+    by ``Delta = C J' e / s^2``, of Mahalanobis length ``|L' J' e| / s^2``: the
+    white-noise least squares' ``|P_J e|`` where ``C = (J'J)^-1``, that shift
+    over ``s`` where ``C`` is ``s^2`` times wider, and bounded by the prior along a
+    direction the data hardly inform (where the least-squares shift is not).
 
     Parameters
     ----------
@@ -304,15 +315,16 @@ def shift_in_posterior(
 
     Returns
     -------
-    ``sqrt(mean_b Delta_b' C^-1 Delta_b)`` with ``Delta_b = (J'J)^-1 J' e_b``.
+    ``sqrt(mean_b |L' J' e_b|^2) / s^2``.
     """
     jac = np.asarray(sensitivity, dtype=float)
     e = np.atleast_2d(np.asarray(errors, dtype=float))
-    delta = np.linalg.lstsq(jac, e.T, rcond=None)[0]  # (t, b)
     cov = np.atleast_2d(np.asarray(covariance, dtype=float))
     chol = np.linalg.cholesky(cov + 1e-12 * np.diag(np.diag(cov)))
-    z = np.linalg.solve(chol, delta)
-    return float(np.sqrt(np.mean(np.sum(z**2, axis=0))))
+    jl = jac @ chol  # (n, t)
+    inflation = float(np.linalg.eigvalsh(jl.T @ jl)[-1])
+    z = (e @ jl) / inflation  # (b, t): L' J' e_b / s^2
+    return float(np.sqrt(np.mean(np.sum(z**2, axis=1))))
 
 
 def _variance(em: EmulatorResult, unit: np.ndarray) -> np.ndarray:
