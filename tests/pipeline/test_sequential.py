@@ -68,7 +68,11 @@ def test_update_adds_the_new_days_with_the_posterior_as_prior(
     assert "runs: re-simulated: the boundary conditions now cover 6 more days (runs" in "\n".join(
         said
     )
-    assert any("(warm-up 10080min: all)" in line for line in said)
+    assert any(
+        "trained from 2012-02-08T00:00:00, simulated from 2012-02-01T00:00:00 (--warmup all)"
+        in line
+        for line in said
+    )
     new = load_results(done.study)
     assert new.posterior is not None
     assert all(isinstance(p, PosteriorPrior) for p in new.posterior.priors.values())
@@ -118,7 +122,9 @@ def test_update_adds_the_new_days_with_the_posterior_as_prior(
     # first study's test window (2012-02-08)
     made = load_study(folder / "update-001.toml")
     assert made.data.start == pd.Timestamp("2012-02-01")
-    assert made.periods.warmup == pd.Timedelta("7D")
+    assert made.periods.warmup == pd.Timedelta("1D")  # the study's own (gaps, new records)
+    assert pd.Timestamp(made.periods.train_from) == pd.Timestamp("2012-02-08")
+    assert load_results(made).context.measured.layout.warmup == 7 * 48
     # nothing newer: the record after the last test window is too short for a period
     with pytest.raises(BayescalError):
         update(load_study(folder), options=Options(backend="serial"))
@@ -211,17 +217,35 @@ def test_prior_from_refuses_an_unfinished_or_unrelated_study(first: Path, tmp_pa
 
 def test_the_warm_up_of_an_update_is_the_study_s_or_a_duration(first: Path) -> None:
     """``warmup="study"``: the record starts one study warm-up (a day) before the first
-    study's test window; a duration: that long before it."""
+    study's test window; a duration: that long before it; training starts at that window
+    either way (``[periods] train_from``), the study's own warm-up kept."""
     study = load_study(first)
     for warmup, start in (("study", "2012-02-07"), (pd.Timedelta("3D"), "2012-02-05")):
         raw = update_module._update_raw(study, study, 1, None, None, warmup)
         assert pd.Timestamp(raw["data"]["start"]) == pd.Timestamp(start)
-        assert pd.Timedelta(raw["periods"]["warmup"]) == pd.Timestamp("2012-02-08") - pd.Timestamp(
-            start
-        )
+        assert pd.Timestamp(raw["periods"]["train_from"]) == pd.Timestamp("2012-02-08")
+        assert "warmup" not in raw["periods"] or raw["periods"]["warmup"] == "1D"
+    for bad in ("12h", "25h 15min"):  # shorter than the study's warm-up; off the clock
+        with pytest.raises(ConfigError, match="must be a multiple of the data step"):
+            update_module._update_raw(study, study, 1, None, None, pd.Timedelta(bad))
 
 
-@pytest.mark.parametrize("value", ["soon", "-1D", "0h"])
+def test_train_from_starts_the_training_and_a_test_fraction_counts_from_before_it() -> None:
+    """The layout of an update: no training period before ``train_from``; the test window
+    a fraction of the record from one warm-up before it (as with the study's warm-up)."""
+    from bayescal.config.study import PeriodsSection
+    from bayescal.data.measured import layout_for
+
+    step = pd.Timedelta("30min")
+    periods = PeriodsSection(length="1D", warmup="1D", test_fraction=0.25)
+    short = layout_for(48 * 9, step, periods)  # one warm-up day and 8 days
+    long = layout_for(48 * 16, step, periods, skip=48 * 8)  # 7 more days before train_from
+    assert long.warmup == 48 * 8
+    assert long.n_total - long.test_begin == short.n_total - short.test_begin
+    assert long.m_star == short.m_star
+
+
+@pytest.mark.parametrize("value", ["soon", "-1D", "0h", "3"])
 def test_cli_update_refuses_a_warm_up_that_is_no_duration(
     first: Path, tmp_path: Path, value: str
 ) -> None:
@@ -289,3 +313,21 @@ def test_an_update_equals_one_calibration_on_every_day(tmp_path: Path) -> None:
             np.testing.assert_array_less(gaps[warmup], 0.3)
             np.testing.assert_array_less(np.abs(wb / wc - 1.0), 0.15)
     assert gaps["study"].max() > gaps["all"].max()
+
+
+def test_an_update_whose_file_starts_too_late_is_one_line_and_writes_nothing(
+    first: Path, tmp_path: Path
+) -> None:
+    """``--data`` holding the new days only, with ``warmup="all"``: the record from the
+    first study's start is not in it; said before ``update-001.toml`` is written. The
+    default with ``--data`` (the study's warm-up) reads it."""
+    folder = tmp_path / "wall"
+    shutil.copytree(first, folder)
+    frame = pd.read_csv(folder / "wall.csv")
+    new = tmp_path / "new.csv"
+    frame[frame["time"] >= "2012-02-07"].to_csv(new, index=False)
+    with pytest.raises(ConfigError, match=r"update 1 cannot read its record from 2012-02-01"):
+        update(load_study(folder), data=new, options=Options(backend="serial"), warmup="all")
+    assert not (folder / "update-001.toml").exists()
+    raw = update_module._update_raw(load_study(folder), load_study(folder), 1, new, None)
+    assert pd.Timestamp(raw["data"]["start"]) == pd.Timestamp("2012-02-07")

@@ -509,6 +509,7 @@ def update(
     import pandas as pd
 
     from bayescal.cli.progress import progress_options
+    from bayescal.clock import parse_duration
     from bayescal.config import load_study
     from bayescal.errors import ConfigError
     from bayescal.pipeline import Options
@@ -528,7 +529,7 @@ def update(
     span: str | pd.Timedelta | None = warmup
     if warmup is not None and warmup not in ("all", "study"):
         try:
-            span = pd.Timedelta(warmup)
+            span = parse_duration(warmup)
         except ValueError:
             span = None
         if span is None or span <= pd.Timedelta(0):

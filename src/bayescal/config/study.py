@@ -38,6 +38,7 @@ from bayescal.clock import format_duration, parse_duration
 from bayescal.config.base import (
     IDENTIFIER,
     Duration,
+    Instant,
     Section,
     field_doc,
     path_problem,
@@ -151,6 +152,13 @@ class PeriodsSection(Section):
         "1D",
         "0min",
         default=timedelta(days=1),
+    )
+    train_from: Instant | None = field_doc(
+        "No training period starts before this instant (local time of the data); the record "
+        "before it is simulated, not compared. `bayescal update` sets it to the previous "
+        "test window's start. A test_fraction counts the record from one warm-up before it.",
+        "2013-09-11T00:00:00",
+        default=None,
     )
     test_samples: int | None = field_doc(
         "Test window at the end, in samples.", 300, default=None, ge=0

@@ -288,7 +288,11 @@ MIN_TRAINING_PERIODS = 2
 
 
 def layout_for(
-    n_samples: int, step: pd.Timedelta, periods: PeriodsSection, missing: np.ndarray | None = None
+    n_samples: int,
+    step: pd.Timedelta,
+    periods: PeriodsSection,
+    missing: np.ndarray | None = None,
+    skip: int = 0,
 ) -> PeriodLayout:
     """Lay out a study's periods on a record of ``n_samples`` samples.
 
@@ -302,6 +306,10 @@ def layout_for(
         The study's ``[periods]``.
     missing
         Samples whose measured output is missing (their periods are dropped).
+    skip
+        Samples before ``[periods] train_from``: no training period starts before
+        it (a warm-up at least this long), and a ``test_fraction`` counts the
+        record from one warm-up before it.
 
     Raises
     ------
@@ -309,11 +317,13 @@ def layout_for(
         If the record is shorter than warm-up + one period + test window, or fewer
         than :data:`MIN_TRAINING_PERIODS` training periods are left.
     """
+    length, warmup = _samples(periods.length, step), _samples(periods.warmup, step)
+    before = max(skip - warmup, 0)  # the record before train_from, less one warm-up
     if periods.test_samples is not None:
         test = periods.test_samples
     else:
-        test = round(float(periods.test_fraction or 0.0) * n_samples)
-    length, warmup = _samples(periods.length, step), _samples(periods.warmup, step)
+        test = round(float(periods.test_fraction or 0.0) * (n_samples - before))
+    warmup = max(warmup, skip)
     cover = length * (-(-test // length)) if test > 0 else 0
     need = warmup + length + cover
     if n_samples < need:
@@ -432,8 +442,12 @@ def load_measured(study: Study) -> MeasuredData:
     for values in outputs.values():
         values[record.unusable] = np.nan  # measured, but against invented inputs
     _check_outputs(outputs, study.data, source)
+    skip = 0
+    if study.periods.train_from is not None:
+        first = to_utc(pd.Timestamp(study.periods.train_from), record.zone)
+        skip = int(pd.DatetimeIndex(frame.index).tz_convert("UTC").searchsorted(first))
     try:
-        layout = layout_for(len(frame), step, study.periods, _missing(outputs, len(frame)))
+        layout = layout_for(len(frame), step, study.periods, _missing(outputs, len(frame)), skip)
     except DataError as exc:  # name the file the record comes from
         raise DataError(exc.message, hint=exc.hint, source=exc.source or source) from None
     return record.measured(study, outputs, layout)

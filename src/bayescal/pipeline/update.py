@@ -16,8 +16,9 @@ import numpy as np
 import pandas as pd
 import tomli_w
 
+from bayescal.clock import format_duration
 from bayescal.config import Study, load_study
-from bayescal.errors import ConfigError
+from bayescal.errors import ConfigError, DataError
 from bayescal.store import posterior as posterior_store
 from bayescal.store.stages import StageLog
 
@@ -83,20 +84,36 @@ def _update_raw(
     end: pd.Timestamp | None,
     warmup: str | pd.Timedelta = "study",
 ) -> dict[str, Any]:
-    """The study dictionary of update ``k``: the previous study's, on the record from its
-    test window (less ``warmup``: :func:`update`) to ``end``, with the previous posterior
-    as prior."""
+    """The study dictionary of update ``k``: the previous study's, trained from its test
+    window (``[periods] train_from``) to ``end``, its record starting ``warmup`` before
+    that (:func:`update`), with the previous posterior as prior.
+
+    Raises
+    ------
+    ConfigError
+        ``warmup`` shorter than the study's own warm-up, or not a multiple of the
+        data step.
+    """
     from bayescal.data.measured import load_measured
 
     measured = load_measured(previous)
     layout = measured.layout
     first = pd.Timestamp(measured.times[min(layout.test_begin, layout.n_total - 1)])
+    own = pd.Timedelta(previous.periods.warmup)
+    step = pd.Timedelta(measured.step, "s")
     if warmup == "all":
-        span = first - pd.Timestamp(load_measured(base).times[0])
+        span = max(first - pd.Timestamp(load_measured(base).times[0]), own)
     elif warmup == "study":
-        span = pd.Timedelta(measured.step, "s") * layout.warmup
+        span = own
     else:
         span = pd.Timedelta(warmup)
+        if span < own or span % step != pd.Timedelta(0):
+            raise ConfigError(
+                f"--warmup {format_duration(span)} must be a multiple of the data step "
+                f"({format_duration(step)}) and at least the study's warm-up "
+                f"({format_duration(own)})",
+                hint=f"e.g. --warmup {format_duration(3 * own)}, or --warmup all",
+            )
     start_utc = first - span
     assert previous.path is not None
     raw = tomllib.loads(Path(previous.path).read_text(encoding="utf-8"))
@@ -110,14 +127,22 @@ def _update_raw(
         section.pop("end", None)
     begin = pd.Timestamp(section["start"])
     stop = None if end is None else pd.Timestamp(end)
+    # the first study's exclusions too: an update made with a shorter warm-up dropped
+    # the early ones, which a longer warm-up simulates again
+    base_data = tomllib.loads(Path(base.path or "").read_text(encoding="utf-8")).get("data", {})
+    same_file = data is None and base_data.get("file") == section.get("file")
+    windows = (base_data.get("exclude", []) if same_file else []) + section.get("exclude", [])
     section["exclude"] = [
         w
-        for w in section.get("exclude", [])
-        if pd.Timestamp(w["end"]) > begin and (stop is None or pd.Timestamp(w["start"]) < stop)
+        for i, w in enumerate(windows)
+        if w not in windows[:i]
+        and pd.Timestamp(w["end"]) > begin
+        and (stop is None or pd.Timestamp(w["start"]) < stop)
     ]
     if not section["exclude"]:
         section.pop("exclude")
-    raw.setdefault("periods", {})["warmup"] = f"{int(span.total_seconds() // 60)}min"
+    periods = raw.setdefault("periods", {})
+    periods["train_from"] = _local(first.to_datetime64(), measured.zone)
     meta = raw.setdefault("study", {})
     meta["prior_from"] = Path(previous.path).name
     base_raw = tomllib.loads(Path(base.path or "").read_text(encoding="utf-8")).get("study", {})
@@ -303,7 +328,8 @@ def update(
     the previous study, written into ``OUTPUT_DIR/update-00k``.
 
     ``warmup`` is how much of the record before the previous test window is
-    simulated without being compared (the update's ``[periods] warmup``):
+    simulated without being compared (the update's ``[periods] train_from`` is the
+    previous test window's start; its ``[periods] warmup`` stays the study's):
     ``"all"`` (the default without ``data``) from the first study's start, so
     that the simulated state at the new days is that of one calibration on
     every day (a heavy wall remembers more than a day: on the 14-day virtual
@@ -328,6 +354,7 @@ def update(
     """
     from bayescal.atomic import atomic_write_text
     from bayescal.config.study import study_from_dict
+    from bayescal.data.measured import load_measured
     from bayescal.pipeline.run import run as run_pipeline
 
     tell = say or (lambda _: None)
@@ -350,6 +377,16 @@ def update(
     raw = _update_raw(previous, study, k, data, end, warmup)
     path = Path(study.path or "").parent / UPDATE_PATTERN.format(k)
     changed = study_from_dict(raw, root=study.root, source=str(path))
+    said = warmup if isinstance(warmup, str) else format_duration(warmup)
+    try:  # the record the update needs, checked before its file is written
+        load_measured(changed)
+    except DataError as exc:
+        raise ConfigError(
+            f"update {k} cannot read its record from {raw['data']['start']} (--warmup "
+            f"{said}): {exc.message}",
+            hint="give --warmup study or a shorter duration, or --data a file that "
+            "covers those days",
+        ) from None
     text = (
         f"# Update {k} of {Path(study.path or '').name}, written by `bayescal update`: the study's "
         "settings on the\n# newly arrived record, with the previous posterior as prior.\n"
@@ -357,8 +394,8 @@ def update(
     atomic_write_text(path, text + tomli_w.dumps(raw))
     changed = load_study(path)
     tell(
-        f"update {k}: the record from {raw['data']['start']} on (warm-up "
-        f"{raw['periods']['warmup']}: {warmup}), with the posterior of "
+        f"update {k}: trained from {raw['periods']['train_from']}, simulated from "
+        f"{raw['data']['start']} (--warmup {said}), with the posterior of "
         f"{Path(previous.path or '').name} as prior; the calibration chains start from its "
         f"draws; burn-in kept at {changed.calibration.burn} sweeps (a warm start was measured "
         "not to converge sooner: the burn-in adapts the proposal widths)"
