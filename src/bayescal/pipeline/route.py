@@ -25,7 +25,8 @@ apart, is not in the centre. Where that error exceeds the tolerance on the
 emulator route, the run warns that its point metrics (RMSE, CV(RMSE)) will be
 worse than the simulator route's (on the office example, hourly gas CV(RMSE)
 18.3 % on the held-out week against 6.0 % from the simulator route at the same
-posterior, both with bands at their rates: docs/validation/case-studies-log.md).
+posterior, both routes' 95 % bands covering 0.93-0.99 of the week:
+docs/validation/case-studies-log.md).
 """
 
 from __future__ import annotations
