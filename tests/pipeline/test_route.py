@@ -18,8 +18,9 @@ import numpy as np
 import pytest
 from test_seqdesign import _study
 
+from bayescal.cli.progress import describe
 from bayescal.config import load_study
-from bayescal.pipeline import Options, Results, run
+from bayescal.pipeline import Options, Results, load_results, run
 from bayescal.pipeline.predict import thin_draws
 from bayescal.pipeline.route import check_draws
 from bayescal.pipeline.stages import prepare
@@ -78,6 +79,9 @@ def test_a_tolerance_above_the_measured_error_takes_the_emulator_route(
     assert warning.startswith("WARNING: ")
     centre = float(warning.split("heat_flux_in ")[1].split(" x")[0])
     assert centre > max(2 * measured, 0.3) > measured
+    # kept with the predictions: `show` repeats it on its first screen
+    shown = describe(load_results(load_study(tmp_path / "wall")))
+    assert warning in shown.split("posterior (physical units):")[0]
 
 
 def test_the_held_out_draws_are_among_the_simulator_routes_draws(

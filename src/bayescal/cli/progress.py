@@ -215,6 +215,8 @@ def _first_screen(res: Results) -> list[str]:
         held = held_out_outputs(dict(res.predictions.dataset.attrs))
     disc = res.discrepancy.posterior if res.discrepancy is not None else None
     lines = [f"WARNING: {w}" for w in trust_warnings(res.posterior, disc, metrics, held, sizes)]
+    if res.predictions is not None and (text := res.predictions.dataset.attrs.get("route_warning")):
+        lines.append(f"WARNING: {text}")  # [predict] method = "auto": the route's centre
     if sizes:
         lines += ["", "model error (in-likelihood discrepancy against the noise):"]
         lines += [f"  {size.line()}" for size in sizes]

@@ -476,15 +476,17 @@ def _predictions(
     if ok:
         return found
     start = time.perf_counter()
-    route = None
+    route, centre = None, None
     if r.ctx.study.predict.method == "auto":
         check = check_route(r.ctx, em, post)
         r._note(check.line())
-        if (text := check.warning()) is not None:
-            r.logger.warning("predict: %s", text)
-            r.say(f"WARNING: {text}")
+        if (centre := check.warning()) is not None:
+            r.logger.warning("predict: %s", centre)
+            r.say(f"WARNING: {centre}")
         route = check.route
     pred = predict_stage(r.ctx, em, post, disc, nominal_run(r.ctx), method=route)
+    if centre is not None:  # kept with the predictions: `show` repeats it
+        pred.dataset.attrs["route_warning"] = centre
     files = predictions_store.save_predictions(r.out, pred.dataset, pred.metrics)
     held = held_out_outputs(dict(pred.dataset.attrs))
     for verdict in catalogue_verdicts(pred.metrics, held):
