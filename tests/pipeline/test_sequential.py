@@ -331,3 +331,24 @@ def test_an_update_whose_file_starts_too_late_is_one_line_and_writes_nothing(
     assert not (folder / "update-001.toml").exists()
     raw = update_module._update_raw(load_study(folder), load_study(folder), 1, new, None)
     assert pd.Timestamp(raw["data"]["start"]) == pd.Timestamp("2012-02-07")
+
+
+def test_an_update_on_data_that_show_a_model_error_says_it_is_not_the_joint_calibration(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """Where the in-likelihood discrepancy's verdict shows a model error, ``update`` warns
+    that a chain of updates is narrower than one calibration on every day; not otherwise."""
+    from types import SimpleNamespace
+
+    import bayescal.calibration.modelerror as modelerror
+
+    results = SimpleNamespace(posterior=object(), emulator=SimpleNamespace(emulator=object()))
+    sizes = [SimpleNamespace(output="heat_flux_in", shown=True)]
+    monkeypatch.setattr(modelerror, "discrepancy_ratios", lambda em, post: sizes)
+    text = update_module.model_error_caveat(results)
+    assert text is not None
+    assert "model error (heat_flux_in)" in text
+    assert "run the study on every day" in text
+    sizes[0].shown = False
+    assert update_module.model_error_caveat(results) is None
+    assert update_module.model_error_caveat(SimpleNamespace(posterior=None, emulator=None)) is None
