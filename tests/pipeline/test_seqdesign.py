@@ -36,6 +36,8 @@ from sequential_study import record
 CORNER = {"k_cb": 0.152, "cp_cb": 680.0, "cp_fb": 840.0}
 EXECUTE = sandbox.execute
 SEQUENTIAL = "[design]\nruns = 4\nsequential = true\nbatch = 4\nmax_runs = {cap}\n"
+#: The same, with a tolerance the rule cannot meet: the cap decides (tests of the loop).
+TO_THE_CAP = SEQUENTIAL + "tolerance = 1e-9\n"
 
 
 def _study(folder: Path, design: str, seed: int = 1, days: int = 6, long: bool = False) -> Path:
@@ -116,7 +118,7 @@ class _Counting:
 def test_killed_between_batches_resumes_without_running_a_batch_again(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    folder = _study(tmp_path / "wall", SEQUENTIAL.format(cap=16))
+    folder = _study(tmp_path / "wall", TO_THE_CAP.format(cap=16))
     study = load_study(folder)
     killer = _Counting(stop_after=10)  # the first design (4), one batch (4), 2 of the next
     monkeypatch.setattr(sandbox, "execute", killer)
@@ -145,7 +147,7 @@ def test_killed_between_batches_resumes_without_running_a_batch_again(
 def test_a_batch_with_failed_runs_is_reported_and_the_design_goes_on(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    folder = _study(tmp_path / "wall", SEQUENTIAL.format(cap=12))
+    folder = _study(tmp_path / "wall", TO_THE_CAP.format(cap=12))
     monkeypatch.setattr(sandbox, "execute", _Counting(fail=lambda n: n in (6, 7)))
     said: list[str] = []
     res = run(
@@ -201,3 +203,23 @@ def test_sequential_reaches_the_one_shot_posterior_with_half_the_runs(tmp_path: 
     truth = np.array([CORNER["k_cb"], CORNER["cp_cb"]])
     for lo, hi in ((lo1, hi1), (lo2, hi2)):
         assert np.all((lo <= truth) & (truth <= hi))
+
+
+def test_the_rule_stops_only_once_two_short_calibrations_agree(tmp_path: Path) -> None:
+    """The first posteriors of a small design are wide (the emulator's own variance), and
+    in their SDs any error looks small: the design goes on until the last two short
+    calibrations' SDs agree within 20 % (or the cap)."""
+    folder = _study(tmp_path / "wall", SEQUENTIAL.format(cap=28))
+    res = run(load_study(folder), until="design", options=Options(backend="serial"))
+    assert res.design is not None
+    history = pd.read_csv(prepare(load_study(folder)).out / HISTORY_FILE)
+    with_sd = history.dropna(subset=["sd_k_cb"])
+    assert len(with_sd) >= 2  # never on the first design's posterior alone
+    # measured: the shift after the first batch, 0.14, was in the SDs of the 4-run
+    # posterior, 50 times wider than the 8-run one
+    assert res.design.runs > 8
+    if res.design.runs < 28:  # stopped by the rule: the last two posteriors agree
+        last, before = with_sd.iloc[-1], with_sd.iloc[-2]
+        for name in ("k_cb", "cp_cb"):
+            assert abs(last[f"sd_{name}"] / before[f"sd_{name}"] - 1.0) <= 0.2
+        assert history["shift"].iloc[-1] <= 0.2

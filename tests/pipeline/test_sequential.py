@@ -21,7 +21,7 @@ from click.testing import CliRunner
 from bayescal.cli import main
 from bayescal.config import load_study
 from bayescal.design import PosteriorPrior
-from bayescal.errors import BayescalError, ConfigError
+from bayescal.errors import ConfigError
 from bayescal.pipeline import Options, load_results, run, sequential
 from bayescal.pipeline import update as update_module
 from bayescal.pipeline.sequential import prior_from_draws, warm_starts
@@ -126,8 +126,10 @@ def test_update_adds_the_new_days_with_the_posterior_as_prior(
     assert pd.Timestamp(made.periods.train_from) == pd.Timestamp("2012-02-08")
     assert load_results(made).context.measured.layout.warmup == 7 * 48
     # nothing newer: the record after the last test window is too short for a period
-    with pytest.raises(BayescalError):
+    with pytest.raises(ConfigError, match=r"update 2: the data after .* are too short") as err:
         update(load_study(folder), options=Options(backend="serial"))
+    assert err.value.hint == "wait for more data, or give --to or --data"
+    assert not (folder / "update-002.toml").exists()
 
 
 def test_warm_started_chains_sample_the_same_posterior_as_cold_ones(
@@ -228,6 +230,22 @@ def test_the_warm_up_of_an_update_is_the_study_s_or_a_duration(first: Path) -> N
     for bad in ("12h", "25h 15min"):  # shorter than the study's warm-up; off the clock
         with pytest.raises(ConfigError, match="must be a multiple of the data step"):
             update_module._update_raw(study, study, 1, None, None, pd.Timedelta(bad))
+
+
+def test_an_update_trains_from_the_previous_studys_first_test_period(tmp_path: Path) -> None:
+    """A test window off the period grid (60 samples of 48-sample periods): its periods
+    reach back to two days before the end, where the study's training ended; the update
+    trains from there, so that no day is left out of the chain."""
+    folder = _study(tmp_path / "wall")
+    path = folder / "study.toml"
+    path.write_text(
+        path.read_text(encoding="utf-8").replace("test_samples = 48", "test_samples = 60"),
+        encoding="utf-8",
+    )
+    study = load_study(folder)
+    raw = update_module._update_raw(study, study, 1, None, None, "study")
+    assert pd.Timestamp(raw["periods"]["train_from"]) == pd.Timestamp("2012-02-07")
+    assert pd.Timestamp(raw["data"]["start"]) == pd.Timestamp("2012-02-06")
 
 
 def test_train_from_starts_the_training_and_a_test_fraction_counts_from_before_it() -> None:

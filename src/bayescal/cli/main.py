@@ -480,7 +480,9 @@ def predict(
     metavar="all|study|DURATION",
     help="How much of the record before the new days is simulated, not compared: 'all' "
     "(from the first study's start: the state of one calibration on every day), 'study' "
-    "(the study's warm-up) or a duration such as 3D [default: all; with --data, study].",
+    "(the study's warm-up) or a duration, a multiple of the data step and at least the "
+    "study's warm-up [default: all; with --data or after an update from another file, "
+    "study].",
 )
 @simulation_options
 @click.option("--quiet", "-q", is_flag=True, help="No progress bars or notes; errors only.")
@@ -535,7 +537,7 @@ def update(
         if span is None or span <= pd.Timedelta(0):
             raise ConfigError(
                 f"--warmup {warmup!r} is neither 'all', 'study' nor a positive duration",
-                hint="e.g. --warmup all, --warmup 3D or --warmup 36h",
+                hint="e.g. --warmup all, --warmup study or --warmup 7D",
             )
     options = Options(backend=backend, jobs=jobs, scheduler=scheduler, **progress_options(quiet))
     result = run_update(

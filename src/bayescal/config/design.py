@@ -75,8 +75,9 @@ class DesignSection(Section):
         "sequential: the design stops when the emulator's error measured on the newest "
         "batch (run at posterior draws, predicted before the batch joined the emulator's "
         "runs) would move the posterior mean by at most this many posterior standard "
-        "deviations (the Mahalanobis length of the least-squares shift in the current "
-        "posterior's covariance, docs/method.md 'Sequential design'); it also stops after "
+        "deviations (the posterior mean's shift in the current posterior's own SDs, "
+        "docs/method.md 'Sequential design') and the last two short "
+        "calibrations' SDs agree within 20 %; it also stops after "
         "three batches without a smaller shift "
         "(the emulator's error floor). [-]",
         0.2,

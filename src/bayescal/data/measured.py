@@ -323,16 +323,19 @@ def layout_for(
         test = periods.test_samples
     else:
         test = round(float(periods.test_fraction or 0.0) * (n_samples - before))
-    warmup = max(warmup, skip)
+    what = "warm-up"
+    if skip > warmup:  # [periods] train_from: the record before it is not compared
+        warmup, what = skip, "record before [periods] train_from"
     cover = length * (-(-test // length)) if test > 0 else 0
     need = warmup + length + cover
     if n_samples < need:
         raise DataError(
             f"the record is {format_duration(n_samples * step)} ({n_samples} samples) long; it "
-            f"must be at least {_span(need, step)} ({need} samples): warm-up "
+            f"must be at least {_span(need, step)} ({need} samples): {what} "
             f"{warmup} + one period {length} + the whole periods covering the test window "
             f"{cover} samples",
-            hint="use a longer record, or shorten [periods] warmup, length or the test window",
+            hint="use a longer record, or shorten [periods] warmup, length or the test window"
+            + (", or move train_from earlier" if what != "warm-up" else ""),
         )
     layout = layout_periods(n_samples, length, warmup, test, missing)
     if layout.m_star < MIN_TRAINING_PERIODS:
@@ -341,7 +344,7 @@ def layout_for(
         more = f" ({dropped} more dropped: missing data)" if dropped else ""
         raise DataError(
             f"[periods] leaves {layout.m_star} training period{more} of {length} samples "
-            f"between the warm-up ({warmup} samples) and the test window ({test} samples); "
+            f"between the {what} ({warmup} samples) and the test window ({test} samples); "
             f"the calibration needs at least {MIN_TRAINING_PERIODS} (the emulator's variable "
             "conditions compare the boundary conditions between periods)",
             hint=f"shorten [periods] {key}, warmup or length, or use a longer record"

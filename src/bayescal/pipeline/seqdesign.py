@@ -20,10 +20,13 @@ et al. 2018, Sürer, Plumlee and Wild 2024):
    (the runs minus the predictions kept in 3, projected on the basis: the
    out-of-basis rest does not shrink with more runs) is turned into the shift
    it would cause in the posterior mean, in posterior SDs (:func:`posterior_shift`:
-   the least-squares shift ``(J'J)^-1 J' e``, ``J`` the emulator's sensitivities at
-   the posterior mean, measured by its Mahalanobis length in the current
-   posterior's own covariance). The design stops when
-   that shift is at most ``[design] tolerance``, after three batches without a
+   the posterior mean's shift ``C J' e / s^2``, ``J`` the emulator's sensitivities
+   at the posterior mean, ``C`` the current posterior's covariance, ``s^2`` how
+   much its error model widens the white-noise least squares;
+   :func:`shift_in_posterior`). The design stops when
+   that shift is at most ``[design] tolerance`` and the last two short
+   calibrations' SDs agree within :data:`SETTLED` (a posterior a poor emulator
+   widens makes any error look small in its own SDs), after three batches without a
    smaller shift (the emulator's error floor: the GP's nugget), at
    ``max_runs`` runs, or once ``max_minutes`` have passed. Otherwise back to 2.
 
@@ -99,6 +102,10 @@ CANDIDATES = 400
 #: Batches in a row without a new smallest shift after which the design stops: the
 #: emulator's error has reached its floor (the GP's nugget), more runs do not help.
 PATIENCE = 3
+#: Largest relative change of a posterior SD between the last two short calibrations for
+#: the posterior to count as settled: a posterior widened by a poor emulator makes any
+#: error look small in its own SDs, and it narrows as the runs grow.
+SETTLED = 0.2
 
 
 @dataclass(frozen=True)
@@ -234,20 +241,17 @@ def posterior_shift(
 ) -> float:
     """How far the emulator's measured error would move the posterior mean, in posterior SDs.
 
-    With white noise of SD sigma and the model locally linear in theta, an
-    error ``e`` of the emulator's mean shifts the least-squares (and, where the
-    data dominate the prior, the posterior) mean by ``Delta = (J'J)^-1 J' e``,
-    ``J = d eta / d theta`` the outputs' sensitivities, each row over its noise
-    SD. ``J`` is the emulator's, by central differences of half a posterior SD
-    around the posterior mean, over the training periods. The shift is measured
-    by its Mahalanobis length in the current posterior's covariance
-    (``covariance``, physical units, over the parameters whose ``sd`` is above
-    zero, in the order of ``em.emulator.parameter_names``): AR(1) errors, a
-    discrepancy and the emulator's own variance widen the posterior beyond the
-    white-noise least squares' ``sigma^2 (J'J)^-1``, and the shift is judged
-    against the width the calibration actually has. Without ``covariance`` it
-    is ``sigma^2 (J'J)^-1`` and the length is ``|P_J e| / sigma``
-    (:func:`shift_length`). Parameters held fixed (``sd`` zero: ``[design]
+    ``J = d eta / d theta`` is the outputs' sensitivities, each row over its noise
+    SD, the emulator's by central differences of half a posterior SD around the
+    posterior mean, over the training periods. With ``covariance`` (the current
+    posterior's, physical units, over the parameters whose ``sd`` is above zero,
+    in the order of ``em.emulator.parameter_names``) the shift is the posterior
+    mean's, ``C J' e / s^2``, measured in ``C`` (:func:`shift_in_posterior`: AR(1)
+    errors, a discrepancy and the emulator's own variance widen the posterior
+    beyond the white-noise least squares, and a prior bounds what the data
+    hardly inform). Without it, the white-noise least squares' ``|P_J e|``
+    (:func:`shift_length`: a state saved by an earlier bayescal holds no
+    covariance). Parameters held fixed (``sd`` zero: ``[design]
     reuse_screening``'s screened-out inputs) are left out of ``J``. Returns the
     root mean square over the batch (NaN for an empty batch).
     """
@@ -297,7 +301,9 @@ def shift_in_posterior(
     ``s^2``: AR(1) errors, a discrepancy, the emulator's variance) times a prior
     that holds what the data leave open, ``C^-1 = J'J / s^2 + P``. ``s^2`` is the
     smallest inflation that leaves ``P`` positive semi-definite, the largest
-    eigenvalue of ``L' J'J L`` (``C = L L'``). An error ``e`` then moves the mean
+    eigenvalue of ``L' J'J L`` (``C = L L'``), and at least 1 (``J`` is scaled by
+    the noise SD; an error model only widens: where a prior informs every
+    direction the eigenvalue is below ``s^2``). An error ``e`` then moves the mean
     by ``Delta = C J' e / s^2``, of Mahalanobis length ``|L' J' e| / s^2``: the
     white-noise least squares' ``|P_J e|`` where ``C = (J'J)^-1``, that shift
     over ``s`` where ``C`` is ``s^2`` times wider, and bounded by the prior along a
@@ -322,7 +328,8 @@ def shift_in_posterior(
     cov = np.atleast_2d(np.asarray(covariance, dtype=float))
     chol = np.linalg.cholesky(cov + 1e-12 * np.diag(np.diag(cov)))
     jl = jac @ chol  # (n, t)
-    inflation = float(np.linalg.eigvalsh(jl.T @ jl)[-1])
+    # at least 1: J is scaled by the noise SD, and an error model only widens
+    inflation = max(float(np.linalg.eigvalsh(jl.T @ jl)[-1]), 1.0)
     z = (e @ jl) / inflation  # (b, t): L' J' e_b / s^2
     return float(np.sqrt(np.mean(np.sum(z**2, axis=1))))
 
@@ -553,7 +560,7 @@ def sequential_design(ctx: Context, key: str, say: Say) -> tuple[Design, list[St
             last = state.steps[-1]
             cov = state.cov if state.cov is not None and state.cov.size else None
             shift = posterior_shift(em, diffs, state.noise, last.mean, last.sd, cov)
-        done = bool(np.isfinite(shift)) and shift <= section.tolerance
+        done = bool(np.isfinite(shift)) and shift <= section.tolerance and _settled(state.steps)
         failed = [f.index for f in sims.failures]
         if failed:  # dropped: the runner would try them again at every step
             say(
@@ -582,7 +589,8 @@ def sequential_design(ctx: Context, key: str, say: Say) -> tuple[Design, list[St
         if done or full or over_time or stalled or post is None:
             why = (
                 f"the emulator's error on the newest batch would move the posterior mean by "
-                f"{shift:.2g} posterior SD, within tolerance = {section.tolerance:g}"
+                f"{shift:.2g} posterior SD, within tolerance = {section.tolerance:g}, and the "
+                f"posterior's SDs changed by less than {SETTLED:.0%} with the batch before"
                 if done
                 else f"max_runs = {cap} reached"
                 if full
@@ -610,6 +618,20 @@ def sequential_design(ctx: Context, key: str, say: Say) -> tuple[Design, list[St
         state.unit = np.vstack([state.unit, batch])
         state.started = time.perf_counter() - clock
         state.save(ctx.out, outputs, names)
+
+
+def _settled(steps: list[Step]) -> bool:
+    """Whether the last two short calibrations' SDs agree within :data:`SETTLED` (each
+    parameter that varies)."""
+    with_posterior = [st for st in steps if st.sd]
+    if len(with_posterior) < 2:
+        return False
+    before, last = with_posterior[-2], with_posterior[-1]
+    for name, sd in last.sd.items():
+        old = before.sd.get(name, float("nan"))
+        if _varies(sd, last.mean[name]) and not abs(sd / old - 1.0) <= SETTLED:
+            return False
+    return True
 
 
 def _step_line(step: Step, tolerance: float, names: tuple[str, ...]) -> str:

@@ -98,9 +98,15 @@ def _update_raw(
 
     measured = load_measured(previous)
     layout = measured.layout
-    first = pd.Timestamp(measured.times[min(layout.test_begin, layout.n_total - 1)])
-    own = pd.Timedelta(previous.periods.warmup)
     step = pd.Timedelta(measured.step, "s")
+    # where the previous training ended: the first test period (which reaches back
+    # before the test window where that does not start on the period grid), else the
+    # record's end
+    if layout.test_starts.size:
+        first = pd.Timestamp(measured.times[int(layout.test_starts[0])])
+    else:
+        first = pd.Timestamp(measured.times[-1]) + step
+    own = pd.Timedelta(previous.periods.warmup)
     if warmup == "all":
         span = max(first - pd.Timestamp(load_measured(base).times[0]), own)
     elif warmup == "study":
@@ -330,7 +336,7 @@ def update(
     ``warmup`` is how much of the record before the previous test window is
     simulated without being compared (the update's ``[periods] train_from`` is the
     previous test window's start; its ``[periods] warmup`` stays the study's):
-    ``"all"`` (the default without ``data``) from the first study's start, so
+    ``"all"`` (the default while the data are the first study's file) from its start, so
     that the simulated state at the new days is that of one calibration on
     every day (a heavy wall remembers more than a day: on the 14-day virtual
     wall the study's one-day warm-up moved the update's mean conductivity 1.2
@@ -372,8 +378,9 @@ def update(
         previous = candidate
     # the update after the last finished one (an unfinished one is made again)
     k = 1 if previous is study else files.index(Path(previous.path or "")) + 2
-    if warmup is None:
-        warmup = "study" if data is not None else "all"
+    if warmup is None:  # a file other than the first study's need not hold its days
+        other = data is not None or previous.data.file != study.data.file
+        warmup = "study" if other else "all"
     raw = _update_raw(previous, study, k, data, end, warmup)
     path = Path(study.path or "").parent / UPDATE_PATTERN.format(k)
     changed = study_from_dict(raw, root=study.root, source=str(path))
@@ -381,6 +388,12 @@ def update(
     try:  # the record the update needs, checked before its file is written
         load_measured(changed)
     except DataError as exc:
+        if "before the data cover it" not in exc.message:  # too little new data
+            raise ConfigError(
+                f"update {k}: the data after {raw['periods']['train_from']} (the previous "
+                f"test window) are too short: {exc.message}",
+                hint="wait for more data, or give --to or --data",
+            ) from None
         raise ConfigError(
             f"update {k} cannot read its record from {raw['data']['start']} (--warmup "
             f"{said}): {exc.message}",
