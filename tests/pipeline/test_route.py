@@ -82,6 +82,13 @@ def test_a_tolerance_above_the_measured_error_takes_the_emulator_route(
     # kept with the predictions: `show` repeats it on its first screen
     shown = describe(load_results(load_study(tmp_path / "wall")))
     assert warning in shown.split("posterior (physical units):")[0]
+    run(load_study(tmp_path / "wall"), options=Options(backend="serial"))  # the report
+    html = (prepare(load_study(tmp_path / "wall")).out / "report" / "report.html").read_text(
+        encoding="utf-8"
+    )
+    assert "leaves out the runs&#x27; part off the output basis" in html or (
+        "leaves out the runs' part off the output basis" in html
+    )
 
 
 def test_the_held_out_draws_are_among_the_simulator_routes_draws(

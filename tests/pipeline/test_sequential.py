@@ -125,6 +125,10 @@ def test_update_adds_the_new_days_with_the_posterior_as_prior(
     assert made.periods.warmup == pd.Timedelta("1D")  # the study's own (gaps, new records)
     assert pd.Timestamp(made.periods.train_from) == pd.Timestamp("2012-02-08")
     assert load_results(made).context.measured.layout.warmup == 7 * 48
+    from bayescal.cli.progress import study_summary
+
+    summary = study_summary(made, load_results(made).context.measured)
+    assert "warm-up 336 samples (the record before [periods] train_from = 2012-02-08" in summary
     # nothing newer: the record after the last test window is too short for a period
     with pytest.raises(ConfigError, match=r"update 2: the data after .* are too short") as err:
         update(load_study(folder), options=Options(backend="serial"))

@@ -22,6 +22,7 @@ from time import monotonic
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
+import pandas as pd
 
 from bayescal.metrics import KEY_COLUMNS, Metrics, band_notes, metric_columns
 from bayescal.runner import Progress
@@ -84,7 +85,7 @@ def study_summary(study: Any, measured: Any) -> str:
         f"  calibrated outputs: {', '.join(study.outputs.calibrate)}",
         f"clock: step {format_duration(step)}, {measured.times[0]} to {measured.times[-1]} UTC, "
         f"{measured.n} samples ({format_duration(measured.n * step)})",
-        f"periods: warm-up {first} samples{_leftover(first, lay.warmup, step)}, "
+        f"periods: warm-up {first} samples{_leftover(first, lay.warmup, step, study)}, "
         f"{lay.m_star} training periods of {lay.period} samples"
         + (f" ({dropped} more dropped: missing data)" if dropped else "")
         + f", test window {lay.test} samples",
@@ -118,16 +119,22 @@ def study_summary(study: Any, measured: Any) -> str:
     return "\n".join(lines)
 
 
-def _leftover(first: int, warmup: int, step: Any) -> str:
+def _leftover(first: int, warmup: int, step: Any, study: Any = None) -> str:
     """`` (192 of [periods] warmup = 4D + 12 left before the first whole period: ...)``
     where the first period of the grid starts after the warm-up asked for (the samples
-    between join the warm-up, :mod:`bayescal.periods`); ``""`` where it does not."""
+    between join the warm-up, :mod:`bayescal.periods`); ``""`` where it does not. With
+    ``[periods] train_from`` (an update) the warm-up is the record before it."""
     from bayescal.data.align import format_duration
 
+    train_from = getattr(getattr(study, "periods", None), "train_from", None)
+    if train_from is not None and warmup * step > pd.Timedelta(study.periods.warmup):
+        asked = f"the record before [periods] train_from = {train_from:%Y-%m-%dT%H:%M:%S}"
+    else:
+        asked = f"[periods] warmup = {format_duration(warmup * step)}"
     if first == warmup:
-        return ""
+        return f" ({asked})" if train_from is not None else ""
     return (
-        f" ({warmup} of [periods] warmup = {format_duration(warmup * step)} + {first - warmup} "
+        f" ({warmup} of {asked} + {first - warmup} "
         "left before the first whole period: the periods lie on a grid that ends where the "
         "test window's periods begin)"
     )

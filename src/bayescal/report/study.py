@@ -202,6 +202,8 @@ def write_study_report(
     warnings = [*trust_warnings(posterior, disc, metrics, held, sizes), *posterior.warnings]
     if failures:
         warnings.append(f"{len(failures)} simulator run(s) failed and were dropped")
+    if route_warning := predictions.attrs.get("route_warning"):  # method = "auto"
+        warnings.append(str(route_warning))
     inputs = ReportInputs(
         study_name=study.study.name,
         description=study.study.description,
