@@ -63,6 +63,7 @@ def test_update_adds_the_new_days_with_the_posterior_as_prior(
     assert [p.name for p in update_files(study)] == ["update-001.toml"]
     assert any("prior of k_cb, cp_cb from the posterior" in line for line in said)
     assert any("the calibration chains start from its draws" in line for line in said)
+    assert f"note: {update_module.JOINT_NOTE}" in said  # white noise: no model error shown
     # the record is cut by data.end: the runs' boundary conditions are new; by default
     # the update simulates from the first study's start (warm-up: the days trained on)
     assert "runs: re-simulated: the boundary conditions now cover 6 more days (runs" in "\n".join(
@@ -371,6 +372,7 @@ def test_an_update_on_data_that_show_a_model_error_says_it_is_not_the_joint_cali
     assert text is not None
     assert "model error (heat_flux_in)" in text
     assert "run the study on every day" in text
+    assert text.endswith(update_module.JOINT_NOTE)
     sizes[0].shown = False
     assert update_module.model_error_caveat(results) is None
     assert update_module.model_error_caveat(SimpleNamespace(posterior=None, emulator=None)) is None

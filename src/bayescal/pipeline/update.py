@@ -71,6 +71,14 @@ def _local(instant: np.datetime64, zone: Any) -> str:
     return pd.Timestamp(instant).tz_localize("UTC").tz_convert(zone).strftime("%Y-%m-%dT%H:%M:%S")
 
 
+#: What every update says: a chain of updates is one calibration on every day only where
+#: the model does not err (docs/validation/case-studies-log.md, #update-warmup).
+JOINT_NOTE = (
+    "each update fits its error model to its own days, so where the model errs a chain of "
+    "updates is narrower than one calibration on all the days (on the Twin House up to "
+    "2.2 SD apart and 3-65 % narrower); run the study on every day before relying on these "
+    "intervals"
+)
 #: ``warmup`` of :func:`update`: the record from the first study's start, or the study's
 #: own warm-up before the previous test window.
 WARMUPS = ("all", "study")
@@ -417,6 +425,8 @@ def update(
     results = run_pipeline(changed, options=options, say=tell)
     if (caveat := model_error_caveat(results)) is not None:
         tell(f"WARNING: {caveat}")
+    else:
+        tell(f"note: {JOINT_NOTE}")
     history, file = write_history(study, k, results.context.measured)
     written = {"history": file}
     return Update(changed, previous, history, written)
@@ -437,9 +447,4 @@ def model_error_caveat(results: Any) -> str | None:
     ]
     if not shown:
         return None
-    return (
-        f"the data show a model error ({', '.join(shown)}): each update fits its error model "
-        "to its own days, so a chain of updates is narrower than one calibration on all the "
-        "days (on the Twin House up to 2.9 SD apart, 20-63 % narrower); run the study on "
-        "every day before relying on these intervals"
-    )
+    return f"the data show a model error ({', '.join(shown)}): {JOINT_NOTE}"
