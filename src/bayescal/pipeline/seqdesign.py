@@ -309,19 +309,9 @@ def shift_in_posterior(
     over ``s`` where ``C`` is ``s^2`` times wider, and bounded by the prior along a
     direction the data hardly inform (where the least-squares shift is not).
 
-    Parameters
-    ----------
-    sensitivity
-        ``J`` ``(n, t)``: the outputs' derivatives in the parameters, each row
-        divided by its noise SD.
-    errors
-        ``(b, n)``: one error vector per row, divided by the noise SD likewise.
-    covariance
-        ``(t, t)``: the posterior's covariance of the parameters.
-
-    Returns
-    -------
-    ``sqrt(mean_b |L' J' e_b|^2) / s^2``.
+    ``sensitivity`` and ``errors`` are those of :func:`shift_length`;
+    ``covariance`` ``(t, t)`` is the posterior's covariance of the parameters.
+    Returns ``sqrt(mean_b |L' J' e_b|^2) / s^2``.
     """
     jac = np.asarray(sensitivity, dtype=float)
     e = np.atleast_2d(np.asarray(errors, dtype=float))
