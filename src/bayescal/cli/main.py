@@ -515,6 +515,7 @@ def update(
     from bayescal.config import load_study
     from bayescal.errors import ConfigError
     from bayescal.pipeline import Options
+    from bayescal.pipeline.update import WARMUPS
     from bayescal.pipeline.update import update as run_update
 
     config = load_study(study)
@@ -529,7 +530,7 @@ def update(
     if data is not None and not data.is_file():
         raise ConfigError(f"{data}: no such data file", hint="give --data an existing file")
     span: str | pd.Timedelta | None = warmup
-    if warmup is not None and warmup not in ("all", "study"):
+    if warmup is not None and warmup not in WARMUPS:
         try:
             span = parse_duration(warmup)
         except ValueError:

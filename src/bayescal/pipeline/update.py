@@ -342,8 +342,9 @@ def update(
     the previous study, written into ``OUTPUT_DIR/update-00k``.
 
     ``warmup`` is how much of the record before the previous test window is
-    simulated without being compared (the update's ``[periods] train_from`` is the
-    previous test window's start; its ``[periods] warmup`` stays the study's):
+    simulated without being compared (the update's ``[periods] train_from`` is where
+    the previous study's training ended, its first test period's start; its
+    ``[periods] warmup`` stays the study's):
     ``"all"`` (the default while the data are the first study's file) from its start, so
     that the simulated state at the new days is that of one calibration on
     every day (a heavy wall remembers more than a day: on the 14-day virtual
