@@ -270,7 +270,8 @@ def posterior_shift(
         up, down = predict_runs(em, np.vstack([center + h, center - h]))
         cols.append(((up - down) / scale[:, None]).ravel() / (2 * h[j]))
     errors = (diffs / scale[None, :, None]).reshape(len(diffs), -1)
-    if covariance is None:
+    if covariance is None or np.shape(covariance) != (len(free), len(free)):
+        # no covariance (a state of an earlier bayescal), or over other parameters
         return shift_length(np.column_stack(cols), errors)
     return shift_in_posterior(np.column_stack(cols), errors, covariance)
 
@@ -362,7 +363,10 @@ def choose_batch(
     var = _variance(em, cand)
     keep = var >= np.median(var)
     cand, var = cand[keep], var[keep]
-    free = np.ptp(draws, axis=0) > 0.0  # not held at one value
+    held = post.held_names  # at one value in every draw
+    free = np.array([n not in held for n in post.names])
+    if not free.any():
+        free[:] = True
     if not free.any():
         free[:] = True
     scale = np.maximum(draws[:, free].std(axis=0), 1e-9)
@@ -398,10 +402,9 @@ def _varies(sd: Any, mean: Any) -> Any:
 def _free_covariance(post: Posterior, names: tuple[str, ...]) -> np.ndarray:
     """The posterior's covariance over ``names`` that vary (not held fixed)."""
     flat = post.draws.reshape(-1, len(post.names))
-    cols = [post.names.index(n) for n in names if n in post.names]
-    picked = flat[:, cols]
-    varying = _varies(picked.std(axis=0), picked.mean(axis=0))
-    return np.atleast_2d(np.cov(picked[:, varying], rowvar=False))
+    held = post.held_names
+    cols = [post.names.index(n) for n in names if n in post.names and n not in held]
+    return np.atleast_2d(np.cov(flat[:, cols], rowvar=False))
 
 
 @dataclass
