@@ -126,8 +126,9 @@ def test_update_adds_the_new_days_with_the_posterior_as_prior(
     assert made.periods.warmup == pd.Timedelta("1D")  # the study's own (gaps, new records)
     assert pd.Timestamp(made.periods.train_from) == pd.Timestamp("2012-02-08")
     assert load_results(made).context.measured.layout.warmup == 7 * 48
-    from bayescal.cli.progress import study_summary
+    from bayescal.cli.progress import describe, study_summary
 
+    assert update_module.JOINT_NOTE in describe(load_results(made)).split("posterior (")[0]
     summary = study_summary(made, load_results(made).context.measured)
     assert "warm-up 336 samples (the record before [periods] train_from = 2012-02-08" in summary
     # nothing newer: the record after the last test window is too short for a period

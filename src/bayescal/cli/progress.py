@@ -224,6 +224,10 @@ def _first_screen(res: Results) -> list[str]:
     lines = [f"WARNING: {w}" for w in trust_warnings(res.posterior, disc, metrics, held, sizes)]
     if res.predictions is not None and (text := res.predictions.dataset.attrs.get("route_warning")):
         lines.append(f"WARNING: {text}")  # [predict] method = "auto": the route's centre
+    if res.context.study.study.prior_from is not None:  # a sequential calibration
+        from bayescal.pipeline.update import JOINT_NOTE
+
+        lines.append(f"note: the prior is another study's posterior; {JOINT_NOTE}")
     if sizes:
         lines += ["", "model error (in-likelihood discrepancy against the noise):"]
         lines += [f"  {size.line()}" for size in sizes]
