@@ -476,7 +476,7 @@ def _predictions(
     if ok:
         return found
     start = time.perf_counter()
-    route, centre = None, None
+    route, centre, off_basis = None, None, None
     if r.ctx.study.predict.method == "auto":
         check = check_route(r.ctx, em, post)
         r._note(check.line())
@@ -484,7 +484,10 @@ def _predictions(
             r.logger.warning("predict: %s", centre)
             r.say(f"WARNING: {centre}")
         route = check.route
-    pred = predict_stage(r.ctx, em, post, disc, nominal_run(r.ctx), method=route)
+        off_basis = check.off_basis if check.completes else None
+    pred = predict_stage(
+        r.ctx, em, post, disc, nominal_run(r.ctx), method=route, off_basis=off_basis
+    )
     if centre is not None:  # kept with the predictions: `show` repeats it
         pred.dataset.attrs["route_warning"] = centre
     files = predictions_store.save_predictions(r.out, pred.dataset, pred.metrics)

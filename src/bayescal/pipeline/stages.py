@@ -37,6 +37,7 @@ from bayescal.emulator.gp import Emulator, LooResult
 from bayescal.emulator.noise import LogLevel
 from bayescal.emulator.training import train
 from bayescal.errors import ConfigError, SimulatorError
+from bayescal.pipeline.completed import completed_band
 from bayescal.pipeline.keys import derived_seed
 from bayescal.pipeline.predict import (
     Band,
@@ -501,20 +502,23 @@ def predict_stage(
     discrepancy: Discrepancy | None = None,
     nominal: dict[str, np.ndarray] | None = None,
     method: str | None = None,
+    off_basis: Mapping[str, tuple[np.ndarray, np.ndarray]] | None = None,
 ) -> Predictions:
     """Nominal, calibrated (and corrected) predictions with bands, and their metrics.
 
     ``method`` (``"emulator"`` or ``"simulator"``) overrides ``[predict] method``:
     the route that ``method = "auto"`` chose (:mod:`bayescal.pipeline.route`).
+    ``off_basis`` (emulator route): the held-out runs' part off the output basis
+    that completes the centre (:mod:`bayescal.pipeline.completed`).
     """
     section = ctx.study.predict
     route = method or section.method
     if route == "auto":
         raise ValueError("predict_stage needs the route 'auto' chose (bayescal.pipeline.route)")
-    band = _band(ctx, em, posterior, None, route)
+    band = _band(ctx, em, posterior, None, route, off_basis)
     corrected = delta = None
     if discrepancy is not None:
-        corrected = _band(ctx, em, discrepancy.posterior, discrepancy, route)
+        corrected = _band(ctx, em, discrepancy.posterior, discrepancy, route, off_basis)
         delta = delta_series(em.assembled, discrepancy, list(em.emulator.outputs.names))
     m = ctx.measured
     held = ctx.study.outputs.held_out
@@ -532,6 +536,7 @@ def predict_stage(
             "study": ctx.study.study.name,
             "held_out": ",".join(held),
             "route": route,
+            "off_basis": "completed by the held-out runs" if off_basis else "",
         },
     )
     return Predictions(ds, metrics_table(ds))
@@ -569,6 +574,7 @@ def _band(
     posterior: Posterior,
     discrepancy: Discrepancy | None,
     route: str,
+    off_basis: Mapping[str, tuple[np.ndarray, np.ndarray]] | None = None,
 ) -> Band:
     section = ctx.study.predict
     measured = {o: ctx.measured.outputs[o] for o in ctx.study.outputs.calibrate}
@@ -609,6 +615,19 @@ def _band(
             section.level,
         )
         return merge_bands(band, extra)
+    if off_basis:
+        return completed_band(
+            em.emulator,
+            em.assembled,
+            posterior,
+            off_basis,
+            draws=section.draws,
+            level=section.level,
+            noise=section.noise,
+            discrepancy=discrepancy,
+            measured=measured,
+            transforms=transforms,
+        )
     return predict_band(
         em.emulator,
         em.assembled,

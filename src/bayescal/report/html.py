@@ -446,9 +446,10 @@ def write_figures(inputs: ReportInputs, folder: str | Path) -> list[FigureEntry]
 def _route(ds: xr.Dataset) -> str:
     """Which route made the bands (``method = "auto"`` records the one it chose)."""
     route = str(ds.attrs.get("route", ""))
+    done = ", its centre completed off the output basis by the held-out runs"
     return {
         "simulator": "the simulator re-run at posterior draws",
-        "emulator": "the emulator at posterior draws",
+        "emulator": "the emulator at posterior draws" + (done if ds.attrs.get("off_basis") else ""),
     }.get(route, "not recorded (predictions from an earlier bayescal)")
 
 
