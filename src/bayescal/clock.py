@@ -10,12 +10,21 @@ from __future__ import annotations
 
 import difflib
 import re
-from datetime import UTC, timedelta, timezone, tzinfo
+from datetime import UTC, datetime, timedelta, timezone, tzinfo
 from zoneinfo import ZoneInfo, ZoneInfoNotFoundError, available_timezones
 
 import pandas as pd
 
-__all__ = ["format_duration", "parse_duration", "parse_time_zone"]
+from bayescal.errors import ConfigError
+
+__all__ = [
+    "format_duration",
+    "local_time_problem",
+    "local_to_utc",
+    "offset_text",
+    "parse_duration",
+    "parse_time_zone",
+]
 
 _OFFSET_RE = re.compile(r"^(?:UTC|GMT)?\s*([+-])\s*(\d{1,2})(?::?(\d{2}))?$", re.IGNORECASE)
 _DURATION_RE = re.compile(r"[A-Za-z]")
@@ -104,6 +113,96 @@ def parse_time_zone(text: str) -> tzinfo:
         f"unknown time zone {text!r}: expected an IANA name such as 'Europe/Brussels' "
         f"or a fixed offset such as 'UTC+01:00'{_zone_hint(name)}"
     )
+
+
+def offset_text(offset: timedelta) -> str:
+    """A UTC offset as a study writes it: ``"UTC+01:00"``, ``"UTC-06:00"``."""
+    minutes = round(offset.total_seconds() / 60)
+    sign = "-" if minutes < 0 else "+"
+    hours, rest = divmod(abs(minutes), 60)
+    return f"UTC{sign}{hours:02d}:{rest:02d}"
+
+
+def local_time_problem(value: datetime | pd.Timestamp, zone: tzinfo) -> tuple[str, str] | None:
+    """Why a local time of ``zone`` names no single instant, and how to fix it; ``None``
+    where it does (or carries its own UTC offset).
+
+    A daylight-saving zone repeats an hour when its clocks go back (``2013-10-27T02:30``
+    in Europe/Berlin occurs twice: the message gives both UTC instants) and skips one
+    when they go forward (``2013-03-31T02:30`` does not exist there).
+
+    Returns
+    -------
+    tuple of str or None
+        ``(message, hint)``; the message starts with the time as
+        ``2013-10-27T02:30:00``.
+    """
+    ts = pd.Timestamp(value)
+    if ts.tz is not None or not pd.isna(ts.tz_localize(zone, ambiguous="NaT", nonexistent="NaT")):
+        return None
+    text, day = f"{ts:%Y-%m-%dT%H:%M:%S}", f"{ts:%Y-%m-%d}"
+    if pd.isna(ts.tz_localize(zone, ambiguous="NaT", nonexistent="shift_forward")):
+        first, second = (ts.tz_localize(zone, ambiguous=dst) for dst in (True, False))
+        offsets = [offset_text(t.utcoffset() or timedelta()) for t in (first, second)]
+        instants = " or ".join(
+            f"{t.tz_convert('UTC'):%Y-%m-%d %H:%M} UTC ({o})"
+            for t, o in zip((first, second), offsets, strict=True)
+        )
+        span, noun = _span((first.utcoffset() or timedelta()) - (second.utcoffset() or timedelta()))
+        return (
+            f"{text} occurs twice in time zone {zone}, whose clocks go back {span} on {day}: "
+            f"it is {instants}",
+            f"write the one meant with its offset, '{text}{offsets[0][3:]}' or "
+            f"'{text}{offsets[1][3:]}', or give a time outside the repeated {noun}",
+        )
+    # the last instant before the change; pandas' "shift_forward" assumes an hour's skip
+    before = ts.tz_localize(zone, nonexistent="shift_backward")
+    after = before.tz_convert("UTC").ceil("min").tz_convert(zone)
+    skipped = (after.utcoffset() or timedelta()) - (before.utcoffset() or timedelta())
+    standard = offset_text(before.utcoffset() or timedelta())
+    span, noun = _span(skipped)
+    return (
+        f"{text} does not exist in time zone {zone}, whose clocks skip {span} "
+        f"from {after.tz_localize(None) - skipped:%H:%M} to {after:%H:%M} on {day}",
+        f"give a time outside the skipped {noun} (e.g. "
+        f"'{after:%Y-%m-%dT%H:%M:%S}', {after.tz_convert('UTC'):%H:%M} UTC), or, if the "
+        "data's clock keeps standard time all year, set data.time_zone to its fixed offset "
+        f"'{standard}'",
+    )
+
+
+def _span(change: timedelta) -> tuple[str, str]:
+    """``("an hour", "hour")``, ``("by 30 minutes", "30 minutes")``: how far a
+    daylight-saving change moves the clocks, and the stretch it repeats or skips."""
+    minutes = round(change.total_seconds() / 60)
+    return ("an hour", "hour") if minutes == 60 else (f"by {minutes} minutes", f"{minutes} minutes")
+
+
+def local_to_utc(value: datetime | pd.Timestamp, zone: tzinfo, what: str) -> pd.Timestamp:
+    """``value`` in UTC; a naive one is a local time of ``zone``.
+
+    Parameters
+    ----------
+    value
+        The instant.
+    zone
+        Zone of a naive ``value``.
+    what
+        The key or option that gave it (``"data.start"``, ``"--from"``), for messages.
+
+    Raises
+    ------
+    ConfigError
+        A local time that a daylight-saving change repeats or skips
+        (:func:`local_time_problem`).
+    """
+    ts = pd.Timestamp(value)
+    if ts.tz is not None:
+        return ts.tz_convert("UTC")
+    problem = local_time_problem(ts, zone)
+    if problem is not None:
+        raise ConfigError(f"{what}: {problem[0]}", hint=problem[1])
+    return ts.tz_localize(zone).tz_convert("UTC")
 
 
 def _zone_hint(name: str) -> str:

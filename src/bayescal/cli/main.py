@@ -11,13 +11,17 @@ import functools
 import sys
 import traceback
 from collections.abc import Callable
+from datetime import tzinfo
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import TYPE_CHECKING, Any, TypeVar
 
 import click
 
 from bayescal import __version__
 from bayescal.errors import BayescalError
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 F = TypeVar("F", bound=Callable[..., Any])
 EXIT_USER_ERROR = 2
@@ -117,6 +121,26 @@ def _parse_assignments(values: tuple[str, ...]) -> dict[str, float]:
                 hint="e.g. --set k_cb=0.124",
             ) from None
     return out
+
+
+def _local_time(option: str, text: str | None, zone: tzinfo) -> pd.Timestamp | None:
+    """The time ``--from``/``--to`` gives: naive, a local time of the data's ``zone``, in
+    which the hour that a daylight-saving change repeats or skips is refused by name."""
+    import pandas as pd
+
+    from bayescal.clock import local_to_utc
+    from bayescal.errors import ConfigError
+
+    if text is None:
+        return None
+    try:
+        value = pd.Timestamp(text)
+    except ValueError:
+        raise ConfigError(
+            f"{option} {text!r} is not a date and time", hint="e.g. 2013-09-20T00:00"
+        ) from None
+    local_to_utc(value, zone, option)
+    return value
 
 
 @main.command()
@@ -366,8 +390,6 @@ def predict(
     """
     import dataclasses
 
-    import pandas as pd
-
     from bayescal.cli.progress import progress_options
     from bayescal.config import load_study
     from bayescal.errors import ConfigError
@@ -376,15 +398,9 @@ def predict(
     from bayescal.pipeline.run import writing
 
     config = load_study(study)
-    window = {}
-    for key, text in (("--from", start), ("--to", end)):
-        if text is not None:
-            try:
-                window[key] = pd.Timestamp(text)
-            except ValueError:
-                raise ConfigError(
-                    f"{key} {text!r} is not a date and time", hint="e.g. 2013-09-20T00:00"
-                ) from None
+    other = load_study(as_study) if as_study is not None else None
+    zone = (other or config).data.zone  # --from/--to: local times of the data predicted
+    window = {key: _local_time(key, text, zone) for key, text in (("--from", start), ("--to", end))}
     if data is None and scenario is None and as_study is None:
         raise ConfigError(
             "predict needs --data FILE, --scenario FILE or --as STUDY", hint="see --help"
@@ -428,9 +444,10 @@ def predict(
 
         if method is not None:
             raise ConfigError("--method does not apply to --as (the simulator is re-run)")
+        assert other is not None
         pred = predict_as(
             load_results(config),
-            load_study(as_study),
+            other,
             data,
             start=window.get("--from"),
             end=window.get("--to"),
@@ -519,14 +536,7 @@ def update(
     from bayescal.pipeline.update import update as run_update
 
     config = load_study(study)
-    stop = None
-    if end is not None:
-        try:
-            stop = pd.Timestamp(end)
-        except ValueError:
-            raise ConfigError(
-                f"--to {end!r} is not a date and time", hint="e.g. 2013-10-01"
-            ) from None
+    stop = _local_time("--to", end, config.data.zone)
     if data is not None and not data.is_file():
         raise ConfigError(f"{data}: no such data file", hint="give --data an existing file")
     span: str | pd.Timedelta | None = warmup

@@ -14,7 +14,7 @@ import os
 import re
 import stat
 import types
-from datetime import date, datetime, timedelta
+from datetime import date, datetime, timedelta, tzinfo
 from pathlib import Path
 from typing import Annotated, Any, Union, get_args, get_origin
 
@@ -22,7 +22,7 @@ import pandas as pd
 from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, ValidationInfo, model_validator
 from pydantic_core import PydanticCustomError
 
-from bayescal.clock import parse_duration
+from bayescal.clock import local_time_problem, parse_duration
 
 __all__ = [
     "IDENTIFIER",
@@ -31,6 +31,7 @@ __all__ = [
     "Instant",
     "Section",
     "field_doc",
+    "local_time_problems",
     "raise_problems",
     "resolve_path",
     "suggestion",
@@ -109,6 +110,13 @@ def raise_problems(messages: list[str]) -> None:
     """Raise the collected cross-field problems (each message starts with its key path)."""
     if messages:
         raise PydanticCustomError("cross_check", "{text}", {"text": "; ".join(messages)})
+
+
+def local_time_problems(times: dict[str, datetime | None], zone: tzinfo) -> list[str]:
+    """Problems of local times (key path -> value) that a daylight-saving change of
+    ``zone`` repeats or skips (:func:`bayescal.clock.local_time_problem`)."""
+    found = {key: local_time_problem(value, zone) for key, value in times.items() if value}
+    return [f"{key}: {p[0]}; {p[1]}" for key, p in found.items() if p is not None]
 
 
 def suggestion(name: str, valid: list[str] | tuple[str, ...]) -> str:

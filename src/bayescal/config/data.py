@@ -9,19 +9,20 @@ and a source that suits the file format. Reading the data is
 from __future__ import annotations
 
 import difflib
-from datetime import datetime, timedelta, tzinfo
+from datetime import timedelta, tzinfo
 from pathlib import Path
 from typing import Any, Literal
 
 import pandas as pd
 from pydantic import ValidationInfo, field_validator, model_validator
 
-from bayescal.clock import format_duration, parse_time_zone
+from bayescal.clock import format_duration, local_to_utc, parse_time_zone
 from bayescal.config.base import (
     Duration,
     Instant,
     Section,
     field_doc,
+    local_time_problems,
     raise_problems,
     resolve_path,
     suggestion,
@@ -128,7 +129,9 @@ class DataSection(Section):
     )
     time_zone: str = field_doc(
         "Zone of naive timestamps and of start, end, epoch: IANA name or fixed offset. The "
-        "clock inside is UTC. Not for EPW (the file has its own).",
+        "clock inside is UTC. Not for EPW (the file has its own). A time of the study "
+        "file in the hour that a daylight-saving change repeats or skips is an error; "
+        "give it with its UTC offset ('2013-10-27T02:30:00+01:00').",
         "UTC+01:00",
         "Europe/Brussels",
         default="UTC",
@@ -254,11 +257,22 @@ class DataSection(Section):
                 )
         if fmt == "epw" and "time_zone" in given:
             problems.append("data.time_zone: EPW files carry their own time zone; remove it")
-        if self.start and self.end and _utc(self.start, self.zone) >= _utc(self.end, self.zone):
+        times = {"data.start": self.start, "data.end": self.end, "data.epoch": self.epoch}
+        for i, window in enumerate(self.exclude):
+            times |= {f"data.exclude[{i}].{k}": getattr(window, k) for k in ("start", "end")}
+        unplaced = local_time_problems(times, self.zone)  # then their order is not checked
+        problems += unplaced
+
+        def utc(key: str) -> pd.Timestamp:
+            value = times[key]
+            assert value is not None
+            return local_to_utc(value, self.zone, key)
+
+        if not unplaced and self.start and self.end and utc("data.start") >= utc("data.end"):
             problems.append(f"data.end: {self.end} is not after data.start {self.start}")
         for i, window in enumerate(self.exclude):
             key = f"data.exclude[{i}]"
-            if _utc(window.start, self.zone) >= _utc(window.end, self.zone):
+            if not unplaced and utc(f"{key}.start") >= utc(f"{key}.end"):
                 problems.append(f"{key}.end: {window.end} is not after its start {window.start}")
             for name in window.columns:
                 if name not in self.columns:
@@ -274,11 +288,6 @@ class DataSection(Section):
     def zone(self) -> tzinfo:
         """The parsed time zone."""
         return parse_time_zone(self.time_zone)
-
-
-def _utc(value: datetime, zone: tzinfo) -> pd.Timestamp:
-    ts = pd.Timestamp(value)
-    return ts.tz_convert("UTC") if ts.tz is not None else ts.tz_localize(zone).tz_convert("UTC")
 
 
 def column_problems(key: str, name: str, spec: ColumnSpec, fmt: str) -> list[str]:

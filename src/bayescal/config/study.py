@@ -41,6 +41,7 @@ from bayescal.config.base import (
     Instant,
     Section,
     field_doc,
+    local_time_problems,
     path_problem,
     raise_problems,
     resolve_path,
@@ -639,7 +640,8 @@ def _period_problems(study: Study) -> list[str]:
     ]
     if isinstance(periods.length, timedelta) and periods.length < 2 * step:
         problems.append(f"periods.length: {format_duration(periods.length)} is under 2 steps")
-    return problems
+    zone, train_from = study.data.zone, {"periods.train_from": periods.train_from}
+    return problems + local_time_problems(train_from, zone)
 
 
 #: Warm-up iterations NUTS needs at least (its window adaptation fails on fewer).

@@ -52,13 +52,12 @@ Periods
 from __future__ import annotations
 
 from dataclasses import dataclass
-from datetime import timedelta, timezone, tzinfo
-from typing import overload
+from datetime import timezone, tzinfo
 
 import numpy as np
 import pandas as pd
 
-from bayescal.clock import format_duration
+from bayescal.clock import format_duration, local_to_utc, offset_text
 from bayescal.errors import DataError
 
 MAX_LISTED = 5
@@ -112,15 +111,8 @@ def zone_name(zone: tzinfo) -> str:
     """``"Europe/Brussels"``, ``"UTC-06:00"``, ``"UTC"``."""
     if isinstance(zone, timezone):
         offset = zone.utcoffset(None)
-        return "UTC" if not offset else _offset_text(offset)
+        return "UTC" if not offset else offset_text(offset)
     return str(zone)
-
-
-def _offset_text(offset: timedelta) -> str:
-    minutes = round(offset.total_seconds() / 60)
-    sign = "-" if minutes < 0 else "+"
-    hours, rest = divmod(abs(minutes), 60)
-    return f"UTC{sign}{hours:02d}:{rest:02d}"
 
 
 # --------------------------------------------------------------------------- index checks
@@ -189,7 +181,7 @@ def _dst_error(
         index[pos : pos + 1].tz_localize(zone, ambiguous="NaT", nonexistent="shift_forward")[0]
     )
     if repeated:
-        fixed = f", '{_offset_text(standard)}'" if standard is not None else ""
+        fixed = f", '{offset_text(standard)}'" if standard is not None else ""
         return DataError(
             f"{where}: this local time occurs twice in time zone {zone_name(zone)}, whose "
             f"clocks go back an hour on {day}, and the file holds it once, so which of the "
@@ -198,7 +190,7 @@ def _dst_error(
             f"or in local standard time all year and set data.time_zone to its offset{fixed}",
             source=source,
         )
-    fixed = f", '{_offset_text(before)}'" if before is not None else ""
+    fixed = f", '{offset_text(before)}'" if before is not None else ""
     return DataError(
         f"{where}: this local time does not exist in time zone {zone_name(zone)}, whose "
         f"clocks skip an hour on {day}; the logger probably keeps standard time all year",
@@ -284,18 +276,6 @@ def _midnight_origin(first: pd.Timestamp, zone: tzinfo) -> pd.Timestamp:
     return midnight.tz_convert("UTC")
 
 
-@overload
-def to_utc(value: pd.Timestamp, zone: tzinfo) -> pd.Timestamp: ...
-@overload
-def to_utc(value: None, zone: tzinfo) -> None: ...
-def to_utc(value: pd.Timestamp | None, zone: tzinfo) -> pd.Timestamp | None:
-    """``value`` in UTC; a naive one is a local time of ``zone``."""
-    if value is None:
-        return None
-    ts = pd.Timestamp(value)
-    return ts.tz_convert("UTC") if ts.tz is not None else ts.tz_localize(zone).tz_convert("UTC")
-
-
 def align(
     frame: pd.DataFrame,
     step: pd.Timedelta,
@@ -354,7 +334,8 @@ def align(
         )
     margin = 0 if linear else (ns - data_step.value) // 2  # half a window beyond the samples
     lo, hi = t[0] + margin, t[-1] - margin
-    start_utc, end_utc = to_utc(start, zone), to_utc(end, zone)
+    start_utc = None if start is None else local_to_utc(start, zone, "data.start")
+    end_utc = None if end is None else local_to_utc(end, zone, "data.end")
     origin = start_utc if start_utc is not None else _midnight_origin(index[0], zone)
     if start_utc is not None and start_utc.value < lo:
         first_row = f"; {labels.row(0)} is the first row" if labels is not None else ""

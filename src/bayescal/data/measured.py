@@ -21,8 +21,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 import pandas as pd
 
-from bayescal.clock import format_duration
-from bayescal.data.align import Gap, RowLabels, align, fill_gaps, to_utc
+from bayescal.clock import format_duration, local_to_utc
+from bayescal.data.align import Gap, RowLabels, align, fill_gaps
 from bayescal.data.meters import replace_interval_columns
 from bayescal.data.readers import (
     epw_field,
@@ -214,7 +214,8 @@ def _exclude(
     done = []
     for i, window in enumerate(data.exclude):
         start, end = pd.Timestamp(window.start), pd.Timestamp(window.end)
-        rows = (index >= to_utc(start, zone)) & (index < to_utc(end, zone))
+        first = local_to_utc(start, zone, f"data.exclude[{i}].start")
+        rows = (index >= first) & (index < local_to_utc(end, zone, f"data.exclude[{i}].end"))
         if not rows.any():
             raise DataError(
                 f"data.exclude[{i}]: no row of the file lies in [{window.start}, {window.end})",
@@ -447,7 +448,7 @@ def load_measured(study: Study) -> MeasuredData:
     _check_outputs(outputs, study.data, source)
     skip = 0
     if study.periods.train_from is not None:
-        first = to_utc(pd.Timestamp(study.periods.train_from), record.zone)
+        first = local_to_utc(study.periods.train_from, record.zone, "periods.train_from")
         skip = int(pd.DatetimeIndex(frame.index).tz_convert("UTC").searchsorted(first))
     try:
         layout = layout_for(len(frame), step, study.periods, _missing(outputs, len(frame)), skip)

@@ -16,7 +16,7 @@ import numpy as np
 import pandas as pd
 import tomli_w
 
-from bayescal.clock import format_duration
+from bayescal.clock import format_duration, local_time_problem, local_to_utc
 from bayescal.config import Study, load_study
 from bayescal.errors import ConfigError, DataError
 from bayescal.store import posterior as posterior_store
@@ -67,8 +67,11 @@ def _finished(study: Study) -> bool:
 
 
 def _local(instant: np.datetime64, zone: Any) -> str:
-    """A UTC clock instant as the study's local time text (data.start / data.end)."""
-    return pd.Timestamp(instant).tz_localize("UTC").tz_convert(zone).strftime("%Y-%m-%dT%H:%M:%S")
+    """A UTC clock instant as the study's local time text (data.start / data.end), with
+    its UTC offset in the hour that the clocks repeat (the local time names two instants)."""
+    local = pd.Timestamp(instant).tz_localize("UTC").tz_convert(zone)
+    text = local.strftime("%Y-%m-%dT%H:%M:%S")
+    return text if local_time_problem(local.tz_localize(None), zone) is None else local.isoformat()
 
 
 #: What every update says: a chain of updates is one calibration on every day only where
@@ -134,13 +137,18 @@ def _update_raw(
     section = raw.setdefault("data", {})
     if data is not None:
         section["file"] = str(Path(data).expanduser().resolve())
-    section["start"] = _local(start_utc.to_datetime64(), measured.zone)
+    zone = measured.zone
+    section["start"] = _local(start_utc.to_datetime64(), zone)
     if end is not None:
-        section["end"] = end.strftime("%Y-%m-%dT%H:%M:%S")
+        section["end"] = end.isoformat() if end.tz is not None else f"{end:%Y-%m-%dT%H:%M:%S}"
     else:
         section.pop("end", None)
-    begin = pd.Timestamp(section["start"])
-    stop = None if end is None else pd.Timestamp(end)
+
+    def utc(value: Any, what: str) -> pd.Timestamp:  # local times compared as instants
+        return local_to_utc(pd.Timestamp(value), zone, what)
+
+    begin = start_utc.tz_localize("UTC")
+    stop = None if end is None else utc(end, "--to")
     # the first study's exclusions too: an update made with a shorter warm-up dropped
     # the early ones, which a longer warm-up simulates again
     base_data = tomllib.loads(Path(base.path or "").read_text(encoding="utf-8")).get("data", {})
@@ -150,13 +158,13 @@ def _update_raw(
         w
         for i, w in enumerate(windows)
         if w not in windows[:i]
-        and pd.Timestamp(w["end"]) > begin
-        and (stop is None or pd.Timestamp(w["start"]) < stop)
+        and utc(w["end"], "data.exclude end") > begin
+        and (stop is None or utc(w["start"], "data.exclude start") < stop)
     ]
     if not section["exclude"]:
         section.pop("exclude")
     periods = raw.setdefault("periods", {})
-    periods["train_from"] = _local(first.to_datetime64(), measured.zone)
+    periods["train_from"] = _local(first.to_datetime64(), zone)
     meta = raw.setdefault("study", {})
     meta["prior_from"] = Path(previous.path).name
     base_raw = tomllib.loads(Path(base.path or "").read_text(encoding="utf-8")).get("study", {})
