@@ -9,8 +9,8 @@ part included, the emulator's centre misses them by about 1.4 noise SD: left on
 the basis (``[predict] off_basis = "none"``) the band holds that part apart, and
 the run warns that the route's point metrics are worse than the simulator
 route's; completed with the held-out runs' mean part (the default) it misses each
-run by about 0.1 noise SD against the other runs' part, and its test-window RMSE
-is the simulator route's (measured 0.1013 against 0.1011 W/m²; on the basis
+run, against the other runs' part, by less than the tolerance, and its test-window
+RMSE is the simulator route's (measured 0.1013 against 0.1011 W/m²; on the basis
 0.2026).
 """
 

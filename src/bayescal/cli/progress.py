@@ -264,7 +264,12 @@ def describe(res: Results) -> str:
             attrs = res.predictions.dataset.attrs if res.predictions is not None else {}
             if f"{o.name}_calibrated_noise_sd" in attrs:
                 in_band = float(attrs[f"{o.name}_calibrated_noise_sd"])
-                line += f"; in the bands (from the re-run simulator) {in_band:.4g} {o.unit}"
+                source = (
+                    "the emulator's centre completed off the basis"
+                    if attrs.get("off_basis")
+                    else "the re-run simulator"
+                )
+                line += f"; in the bands (from {source}) {in_band:.4g} {o.unit}"
             lines.append(line)
         from bayescal.calibration.identifiability import identifiability
 

@@ -10,6 +10,8 @@ from __future__ import annotations
 
 from typing import Literal
 
+from pydantic import model_validator
+
 from bayescal.config.base import Section, field_doc
 
 __all__ = ["PredictSection"]
@@ -69,7 +71,8 @@ class PredictSection(Section):
         gt=0,
     )
     noise: Literal["simulator", "basis", "calibration"] = field_doc(
-        "Observation noise in the bands of method = 'simulator': 'simulator' (the default) "
+        "Observation noise in the bands of method = 'simulator' (and of 'auto''s emulator "
+        "route with its centre completed, off_basis = 'check_runs'): 'simulator' (the default) "
         "estimates each output's noise again at every draw from the re-run simulator's "
         "residuals on the training periods (its posterior mean given them; the "
         "calibration's lambda* also holds the emulator's own error, which a re-run "
@@ -94,7 +97,19 @@ class PredictSection(Section):
         "spread over those runs to the band, and estimates the noise again from the "
         "completed centre's residuals on the training periods, as the simulator route "
         "does (needs check_runs >= 2). 'none': the centre on the basis, the part off it in "
-        "the band's noise (lambda*) only.",
+        "the band's noise (lambda*) and, on the test window, the design runs' excess of it "
+        "over the training periods' only. The corrected prediction (the difference process) "
+        "is not completed: Delta, estimated against the centre on the basis, holds that part.",
         "none",
         default="check_runs",
     )
+
+    @model_validator(mode="after")
+    def _completion_needs_two_runs(self) -> PredictSection:
+        if self.method == "auto" and self.off_basis == "check_runs" and self.check_runs < 2:
+            raise ValueError(
+                f"off_basis = 'check_runs' completes the emulator route's centre with the "
+                f"held-out runs' mean part off the basis and needs at least two of them "
+                f"(check_runs = {self.check_runs}): raise check_runs, or set off_basis = 'none'"
+            )
+        return self

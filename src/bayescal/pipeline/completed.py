@@ -22,11 +22,14 @@ plus the spread of ``o`` over the held-out runs as the variance of one more
 run's part (sample variance times ``1 + 1/n``), and then makes the band as the
 simulator route does (:func:`bayescal.pipeline.predict.simulator_band`): the
 noise estimated again from the completed centre's residuals on the training
-periods (:func:`bayescal.pipeline.simnoise.simulator_noise`, which then also
-holds the emulator's in-basis error once more: conservative, and small where
-``auto`` takes this route), an in-likelihood discrepancy kriged from those
-residuals, and the difference process added for the corrected prediction. No
-simulator run is made beyond the held-out ones.
+periods (:func:`bayescal.pipeline.simnoise.simulator_noise`; those residuals
+also hold the emulator's in-basis error and the draw's departure of its part off
+the basis from the mean, which the two variances above add once more:
+conservative, and small where ``auto`` takes this route) and an in-likelihood
+discrepancy kriged from those residuals. No simulator run is made beyond the
+held-out ones. The corrected prediction (the difference process) is not made
+here: Delta was estimated against the emulator's centre on the basis and already
+holds the part off it (:func:`bayescal.pipeline.stages.predict_stage`).
 
 The part off the basis varies with theta; over the posterior's narrow region
 it varies little, which the route check measures: each held-out run against

@@ -101,10 +101,13 @@ Item = tuple[str, Any, bool]
 
 def _predict_dump(predict: dict[str, Any]) -> dict[str, Any]:
     """``[predict]`` as the predict key sees it: the check of ``method = "auto"`` only
-    where it is used (a study without it keeps the key it always had)."""
-    if predict.get("method") == "auto":
-        return predict
-    return {k: v for k, v in predict.items() if k not in ("check_runs", "check_tolerance")}
+    where it is used, and its ``off_basis`` only where it completes the emulator's
+    centre (a study without them keeps the key it always had: ``off_basis = "none"``
+    makes the predictions of before the option)."""
+    unused = {"off_basis"} if predict.get("off_basis", "none") == "none" else set()
+    if predict.get("method") != "auto":
+        unused |= {"check_runs", "check_tolerance", "off_basis"}
+    return {k: v for k, v in predict.items() if k not in unused}
 
 
 def _keyed(stage: str, items: list[Item]) -> tuple[str, dict[str, str]]:

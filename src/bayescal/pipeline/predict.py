@@ -38,6 +38,10 @@ under its known boundary conditions), so it interpolates there between runs as
 on the training periods; and the band adds the out-of-basis variance by which
 the test window's runs exceed the training periods' (:meth:`Assembled.out_of_basis_excess`).
 
+With ``method = "auto"`` on the emulator route the held-out runs of its check
+complete the centre with their part off the output basis
+(:mod:`bayescal.pipeline.completed`, ``[predict] off_basis``).
+
 Samples of the training periods get the training predictions; samples of the
 test window get the predictions of the periods covering it. Everything else
 (warm-up, dropped periods) is NaN.

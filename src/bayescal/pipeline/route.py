@@ -48,6 +48,7 @@ from bayescal.pipeline.predict import (
     predicted_parts,
     thin_draws,
 )
+from bayescal.pipeline.simnoise import simulator_noise
 from bayescal.pipeline.stages import Context, EmulatorResult, level_values, simulate
 
 __all__ = ["RouteCheck", "check_route"]
@@ -86,6 +87,15 @@ class RouteCheck:
         window): what completes the emulator route's centre
         (:func:`bayescal.pipeline.completed.completed_band`); empty with
         ``[predict] off_basis = "none"`` or fewer than two runs.
+    skipped
+        ``off_basis = "check_runs"`` asked for the completion but fewer than two
+        held-out runs succeeded: the centre stays on the basis (the line says so).
+
+    With the completion asked for (and two runs or more) every ratio is over the
+    noise SD the completed band uses, estimated again from the held-out runs'
+    residuals on the training periods (:func:`bayescal.pipeline.simnoise.simulator_noise`);
+    otherwise over the calibration's (from ``lambda*``, which also holds the part
+    off the basis).
     """
 
     route: str
@@ -96,6 +106,7 @@ class RouteCheck:
     centre: dict[str, float] = field(default_factory=dict)
     completed: dict[str, float] = field(default_factory=dict)
     off_basis: dict[str, tuple[np.ndarray, np.ndarray]] = field(default_factory=dict)
+    skipped: bool = False
 
     @property
     def completes(self) -> bool:
@@ -115,6 +126,12 @@ class RouteCheck:
                 f"(held out: {', '.join(f'{o} {c:.2f}' for o, c in self.completed.items())} "
                 "x the noise SD)"
                 if self.completes
+                else ""
+            )
+            + (
+                "; its centre is NOT completed off the output basis: fewer than two held-out "
+                "runs succeeded"
+                if self.skipped and self.route == "emulator"
                 else ""
             )
         )
@@ -145,8 +162,13 @@ class RouteCheck:
             f"misses the {self.runs} held-out runs by {worst} x the noise SD on the "
             f"{self.window} window; its bands hold that part, but its RMSE and CV(RMSE) are "
             "worse than the simulator route's would be; for Guideline 14 figures set "
-            "[predict] method = 'simulator' (or raise [emulator] pca_variance, or set "
-            "[predict] off_basis = 'check_runs')"
+            "[predict] method = 'simulator' (or raise [emulator] pca_variance"
+            + (
+                ", or raise [predict] check_runs"
+                if self.skipped
+                else ", or set [predict] off_basis = 'check_runs'"
+            )
+            + ")"
         )
 
 
@@ -177,6 +199,21 @@ def check_route(ctx: Context, em: EmulatorResult, posterior: Posterior) -> Route
     noise = {o: float(np.median(v)) for o, v in posterior.noise_sd().items()}
     obs = assembled.observations
     order = [o.name for o in obs.outputs]
+    completing = section.off_basis == "check_runs" and len(ok) >= 2
+    if completing:
+        # the unit of every figure: the noise the completed band uses, estimated again
+        # from the runs (lambda* also holds the part off the basis the centre now has)
+        again = simulator_noise(
+            assembled, runs, posterior, pick[sims.indices], section.noise, em.emulator
+        )
+        noise = {
+            o.name: float(
+                np.median(
+                    assembled.outputs.standardisations[q].sd[:, None] / np.sqrt(again[None, :, q])
+                )
+            )
+            for q, o in enumerate(obs.outputs)
+        }
     ratio: dict[str, float] = {}
     centre: dict[str, float] = {}
     completed: dict[str, float] = {}
@@ -206,7 +243,7 @@ def check_route(ctx: Context, em: EmulatorResult, posterior: Posterior) -> Route
         ratio[name] = _rms(series - on_basis) / sd if known else float("inf")
         centre[name] = _rms(series - whole) / sd if known else float("inf")
         part = whole - on_basis  # (runs, n_total): the runs' part off the output basis
-        if len(ok) >= 2:
+        if completing:
             # the mean part, and the variance of one more run's part about it
             spread = part.var(axis=0, ddof=1) * (1.0 + 1.0 / len(ok))
             off_basis[name] = (part.mean(axis=0), spread)
@@ -222,7 +259,8 @@ def check_route(ctx: Context, em: EmulatorResult, posterior: Posterior) -> Route
         section.check_tolerance,
         centre,
         completed,
-        off_basis if section.off_basis == "check_runs" else {},
+        off_basis,
+        skipped=section.off_basis == "check_runs" and not completing,
     )
 
 

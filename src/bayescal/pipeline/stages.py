@@ -509,7 +509,9 @@ def predict_stage(
     ``method`` (``"emulator"`` or ``"simulator"``) overrides ``[predict] method``:
     the route that ``method = "auto"`` chose (:mod:`bayescal.pipeline.route`).
     ``off_basis`` (emulator route): the held-out runs' part off the output basis
-    that completes the centre (:mod:`bayescal.pipeline.completed`).
+    that completes the calibrated prediction's centre (:mod:`bayescal.pipeline.completed`;
+    not the corrected one's: the difference process, estimated against the
+    emulator's centre on the basis, already holds that part).
     """
     section = ctx.study.predict
     route = method or section.method
@@ -518,7 +520,9 @@ def predict_stage(
     band = _band(ctx, em, posterior, None, route, off_basis)
     corrected = delta = None
     if discrepancy is not None:
-        corrected = _band(ctx, em, discrepancy.posterior, discrepancy, route, off_basis)
+        # Delta was estimated against the emulator's centre on the basis, so it already
+        # holds the part off the basis: the corrected prediction stays emulator + Delta
+        corrected = _band(ctx, em, discrepancy.posterior, discrepancy, route)
         delta = delta_series(em.assembled, discrepancy, list(em.emulator.outputs.names))
     m = ctx.measured
     held = ctx.study.outputs.held_out
