@@ -24,10 +24,11 @@ from test_seqdesign import _study
 
 from bayescal.cli.progress import describe
 from bayescal.config import load_study
+from bayescal.config.predict import PredictSection
 from bayescal.pipeline import Options, Results, load_results, run
 from bayescal.pipeline.completed import completed_band
 from bayescal.pipeline.predict import predict_band, thin_draws, windows
-from bayescal.pipeline.route import check_draws
+from bayescal.pipeline.route import RouteCheck, check_draws
 from bayescal.pipeline.stages import prepare
 
 RUNS, CHECK = 10, 3  # fewer held-out runs than the emulator would need (t + 2 = 4)
@@ -182,3 +183,22 @@ def test_the_completed_band_with_no_part_off_the_basis_is_the_emulator_routes(
         )
     with pytest.raises(ValueError, match="no part off the basis"):
         completed_band(em.emulator, em.assembled, post, {}, **kwargs)
+
+
+def test_the_completion_needs_two_held_out_runs() -> None:
+    """``off_basis = "check_runs"`` under ``auto`` with one held-out run is refused in one
+    line that says how to fix it; ``"none"`` or another method accepts one."""
+    with pytest.raises(ValueError, match=r"needs at least two of them \(check_runs = 1\): raise"):
+        PredictSection(method="auto", check_runs=1)
+    assert PredictSection(method="auto", check_runs=1, off_basis="none").check_runs == 1
+    assert PredictSection(method="simulator", check_runs=1).off_basis == "check_runs"
+
+
+def test_a_completion_skipped_for_failed_runs_is_said() -> None:
+    check = RouteCheck("emulator", {"q": 0.1}, 1, "test", 0.3, {"q": 0.9}, skipped=True)
+    assert not check.completes
+    assert "NOT completed off the output basis: fewer than two held-out runs" in check.line()
+    warning = check.warning()
+    assert warning is not None
+    assert "raise [predict] check_runs" in warning
+    assert "set [predict] off_basis" not in warning
