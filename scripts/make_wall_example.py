@@ -97,8 +97,12 @@ def make_boundary(rng: np.random.Generator) -> pd.DataFrame:
     return pd.DataFrame({"time": times.tz_localize(None), "T_se": t_se, "T_si": t_si})
 
 
-def truth_flux(frame: pd.DataFrame, truth: str) -> np.ndarray:
-    """Inside heat flux at the true parameters (positive wall -> room). [W/m²]"""
+def truth_flux(
+    frame: pd.DataFrame, truth: str, values: dict[str, float] | None = None
+) -> np.ndarray:
+    """Inside heat flux at the true parameters ``values`` (default :data:`TRUTH`;
+    positive wall -> room). [W/m²]"""
+    values = TRUTH if values is None else values
     from bayescal.config import build_simulator, load_study
     from bayescal.examples import path
     from bayescal.simulators.base import Forcing
@@ -120,8 +124,26 @@ def truth_flux(frame: pd.DataFrame, truth: str) -> np.ndarray:
 
         sim = paper_wall_simulator(algorithm="ConductionTransferFunction")
         # the boards' conductivity is fixed at the paper's average (Table 1) in both models
-        return sim.simulate(TRUTH | {"k_fb": 0.03157}, forcing)["heat_flux_in"]
-    return sim.simulate(TRUTH, forcing)["heat_flux_in"]
+        return sim.simulate(values | {"k_fb": 0.03157}, forcing)["heat_flux_in"]
+    return sim.simulate(values, forcing)["heat_flux_in"]
+
+
+def make_data(
+    rng: np.random.Generator, truth: str = "energyplus", values: dict[str, float] | None = None
+) -> pd.DataFrame:
+    """The example's table (time, T_se, T_si, q_si): boundary temperatures, then the
+    inside flux of the ``truth`` model at ``values`` (default :data:`TRUTH`) plus noise;
+    the inside surface's wander, then the noise, drawn from ``rng``."""
+    frame = make_boundary(rng)
+    flux = truth_flux(frame, truth, values)
+    frame["q_si"] = flux + rng.normal(0.0, np.sqrt(NOISE_VARIANCE), flux.size)
+    return frame
+
+
+def write_data(frame: pd.DataFrame, out: Path) -> None:
+    """Write the table as the example's CSV."""
+    out.parent.mkdir(parents=True, exist_ok=True)
+    frame.to_csv(out, index=False, float_format="%.4f", date_format="%Y-%m-%d %H:%M")
 
 
 def main() -> None:
@@ -133,12 +155,8 @@ def main() -> None:
         default=Path(__file__).resolve().parents[1] / "src/bayescal/examples/wall/data/wall.csv",
     )
     args = parser.parse_args()
-    rng = np.random.default_rng(SEED)
-    frame = make_boundary(rng)
-    flux = truth_flux(frame, args.truth)
-    frame["q_si"] = flux + rng.normal(0.0, np.sqrt(NOISE_VARIANCE), flux.size)
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    frame.to_csv(args.out, index=False, float_format="%.4f", date_format="%Y-%m-%d %H:%M")
+    frame = make_data(np.random.default_rng(SEED), args.truth)
+    write_data(frame, args.out)
     print(f"wrote {args.out} ({len(frame)} rows, truth from {args.truth}: {TRUTH})")
 
 
