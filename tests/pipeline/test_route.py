@@ -134,6 +134,16 @@ def test_the_emulator_routes_centre_completed_off_the_basis_is_the_simulators(
         encoding="utf-8"
     )
     assert "its centre completed off the output basis by the held-out runs" in html
+    # `show` and the report repeat what the check measured
+    shown = describe(load_results(load_study(tmp_path / "wall")))
+    assert (
+        "bands from the emulator at posterior draws, its centre completed off the output "
+        "basis by the held-out runs (method = 'auto' chose the emulator route" in shown
+    )
+    assert f"held out: heat_flux_in {completed:.2f} x the noise SD" in shown
+    assert "method = &#x27;auto&#x27; chose the emulator route" in html or (
+        "method = 'auto' chose the emulator route" in html
+    )
 
 
 def test_the_held_out_draws_are_among_the_simulator_routes_draws(

@@ -25,6 +25,7 @@ import numpy as np
 import pandas as pd
 
 from bayescal.metrics import KEY_COLUMNS, Metrics, band_notes, metric_columns
+from bayescal.report.answer import route_used
 from bayescal.runner import Progress
 
 if TYPE_CHECKING:
@@ -310,7 +311,9 @@ def describe(res: Results) -> str:
         ]
         cols = [c for c in cols if c in m.columns]  # older runs lack newer columns
         lines.append(m[cols].to_string(index=False, float_format="{:.4g}".format))
-        level = float(res.predictions.dataset.attrs.get("level", 0.95))
+        attrs = dict(res.predictions.dataset.attrs)
+        level = float(attrs.get("level", 0.95))
+        lines.append(f"  bands from {route_used(attrs)}")
         lines += [f"  note: {n}" for n in band_notes(m, level=level)]
         lines.append(TEST_WINDOW_NOTE)
     if res.simulations is not None and res.simulations.failures:

@@ -476,10 +476,11 @@ def _predictions(
     if ok:
         return found
     start = time.perf_counter()
-    route, centre, off_basis = None, None, None
+    route, centre, off_basis, said = None, None, None, None
     if r.ctx.study.predict.method == "auto":
         check = check_route(r.ctx, em, post)
-        r._note(check.line())
+        said = check.line()
+        r._note(said)
         if (centre := check.warning()) is not None:
             r.logger.warning("predict: %s", centre)
             r.say(f"WARNING: {centre}")
@@ -488,7 +489,9 @@ def _predictions(
     pred = predict_stage(
         r.ctx, em, post, disc, nominal_run(r.ctx), method=route, off_basis=off_basis
     )
-    if centre is not None:  # kept with the predictions: `show` repeats it
+    if said is not None:  # kept with the predictions: `show` and the report repeat it
+        pred.dataset.attrs["route_check"] = said
+    if centre is not None:
         pred.dataset.attrs["route_warning"] = centre
     files = predictions_store.save_predictions(r.out, pred.dataset, pred.metrics)
     held = held_out_outputs(dict(pred.dataset.attrs))

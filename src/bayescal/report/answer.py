@@ -14,6 +14,8 @@ already computed (the page's layout is :mod:`bayescal.report.html`'s):
 * :func:`band_lines` -- one line per output: does its 95 % band cover what an
   honest band covers on a window of that many independent samples
   (:func:`bayescal.metrics.honest_range` with the metrics' ``n_eff95``)?
+* :func:`route_used` -- which route made the bands, with what ``method = "auto"``
+  measured to choose it;
 * :func:`discrepancy_used` -- which discrepancy the calibration used: the
   in-likelihood one of an output (``[outputs.errors.NAME] discrepancy``) or
   the difference process (``[discrepancy] enabled``), which are not the same.
@@ -38,6 +40,7 @@ __all__ = [
     "discrepancy_used",
     "fit_table",
     "quantities_table",
+    "route_used",
 ]
 
 Table = Callable[[Sequence[str], list[list[object]]], str]
@@ -236,3 +239,19 @@ def discrepancy_used(posterior: Posterior, discrepancy: Posterior | None) -> tup
         ", ".join(inside) if inside else "none",
         "estimated" if discrepancy is not None else "not used",
     )
+
+
+def route_used(attrs: Mapping[str, object]) -> str:
+    """Which route made the bands (the predictions' attributes: ``route``, and what
+    ``method = "auto"`` measured and chose, ``route_check``, with ``off_basis`` where the
+    emulator's centre was completed by the held-out runs)."""
+    route = str(attrs.get("route", ""))
+    said = {
+        "simulator": "the simulator re-run at posterior draws",
+        "emulator": "the emulator at posterior draws",
+    }.get(route, "not recorded (predictions from an earlier bayescal)")
+    if route == "emulator" and attrs.get("off_basis"):
+        said += ", its centre completed off the output basis by the held-out runs"
+    if check := str(attrs.get("route_check", "")):
+        said += f" ({check.removeprefix('predict: ')})"
+    return said

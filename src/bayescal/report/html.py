@@ -43,6 +43,7 @@ from bayescal.report.answer import (
     discrepancy_used,
     fit_table,
     quantities_table,
+    route_used,
 )
 from bayescal.report.uncertainty import uncertainty_figures, uncertainty_section
 from bayescal.runner import RunFailure
@@ -443,16 +444,6 @@ def write_figures(inputs: ReportInputs, folder: str | Path) -> list[FigureEntry]
 # ----------------------------------------------------------------------------- sections
 
 
-def _route(ds: xr.Dataset) -> str:
-    """Which route made the bands (``method = "auto"`` records the one it chose)."""
-    route = str(ds.attrs.get("route", ""))
-    done = ", its centre completed off the output basis by the held-out runs"
-    return {
-        "simulator": "the simulator re-run at posterior draws",
-        "emulator": "the emulator at posterior draws" + (done if ds.attrs.get("off_basis") else ""),
-    }.get(route, "not recorded (predictions from an earlier bayescal)")
-
-
 def _summary(inputs: ReportInputs) -> str:
     """The first screen: warnings, the verdicts, the fit, the calibrated quantities."""
     post, ds = inputs.posterior, inputs.predictions
@@ -467,7 +458,7 @@ def _summary(inputs: ReportInputs) -> str:
         ("calibration parameters", ", ".join(post.names)),
         ("outputs", ", ".join(_outputs(ds))),
         ("posterior draws", f"{chains} chains × {draws} draws"),
-        ("bands from ([predict] method)", _route(ds)),
+        ("bands from ([predict] method)", route_used(dict(ds.attrs))),
         ("in-likelihood discrepancy ([outputs.errors.NAME] discrepancy)", inside),
         ("difference process Δ ([discrepancy] enabled)", difference),
     ]
