@@ -71,12 +71,16 @@ SEED = 20261127
 INNER = 0.8  # truths inside the middle 80 % of each prior
 
 
-def truths(n: int, seed: int = SEED) -> list[dict[str, float]]:
-    """``n`` truths: a Latin hypercube over the middle ``INNER`` of each prior."""
-    unit = qmc.LatinHypercube(d=len(PRIORS), seed=seed).random(n)
+def truths(
+    n: int, seed: int = SEED, priors: dict[str, tuple[float, float]] | None = None
+) -> list[dict[str, float]]:
+    """``n`` truths: a Latin hypercube over the middle ``INNER`` of each prior
+    (``priors``: name -> uniform bounds, default the box's :data:`PRIORS`)."""
+    bounds = PRIORS if priors is None else priors
+    unit = qmc.LatinHypercube(d=len(bounds), seed=seed).random(n)
     unit = 0.5 * (1.0 - INNER) + INNER * unit
     return [
-        {k: lo + u * (hi - lo) for u, (k, (lo, hi)) in zip(row, PRIORS.items(), strict=True)}
+        {k: lo + u * (hi - lo) for u, (k, (lo, hi)) in zip(row, bounds.items(), strict=True)}
         for row in unit
     ]
 
@@ -199,14 +203,14 @@ def one_truth(
 
 def finished(csv: Path, drawn: list[dict[str, float]]) -> list[dict[str, object]]:
     """The rows of an earlier run kept in ``csv``: its first truths, where they are the
-    truths drawn now (same count and seed), in order."""
+    truths drawn now (same count and seed, the same parameters), in order."""
     if not csv.exists():
         return []
     rows: list[dict[str, object]] = []
     for row in pd.read_csv(csv).to_dict("records"):
         i = len(rows)
         same = i < len(drawn) and all(
-            np.isclose(float(row[f"{k}_true"]), drawn[i][k], rtol=1e-12) for k in PRIORS
+            np.isclose(float(row[f"{k}_true"]), v, rtol=1e-12) for k, v in drawn[i].items()
         )
         if int(row["truth"]) != i or not same:
             break

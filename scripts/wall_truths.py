@@ -51,12 +51,12 @@ from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
-from scipy.stats import qmc  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import make_wall_example as wall  # noqa: E402
-from box_truths import binomial_floor, set_sequential, stop_reason  # noqa: E402
+from box_truths import binomial_floor, finished, set_sequential, stop_reason  # noqa: E402
+from box_truths import truths as box_truths  # noqa: E402
 
 from bayescal.config import load_study  # noqa: E402
 from bayescal.examples import copy_example  # noqa: E402
@@ -69,17 +69,11 @@ PRIORS = {
     "cp_fb": (672.0, 1008.0),
 }
 SEED = 20261129
-INNER = 0.8  # truths inside the middle 80 % of each prior
 
 
 def truths(n: int, seed: int = SEED) -> list[dict[str, float]]:
-    """``n`` truths: a Latin hypercube over the middle ``INNER`` of each prior."""
-    unit = qmc.LatinHypercube(d=len(PRIORS), seed=seed).random(n)
-    unit = 0.5 * (1.0 - INNER) + INNER * unit
-    return [
-        {k: lo + u * (hi - lo) for u, (k, (lo, hi)) in zip(row, PRIORS.items(), strict=True)}
-        for row in unit
-    ]
+    """``n`` truths: a Latin hypercube over the middle 80 % of each prior (as the box's)."""
+    return box_truths(n, seed, PRIORS)
 
 
 def set_runs(study: Path, runs: int) -> None:
@@ -153,23 +147,6 @@ def one_truth(
         row[f"band50_{window}"] = float(r["coverage50"])
         row[f"mse_{window}"] = float(r["mse"]) if "mse" in r else float("nan")
     return row
-
-
-def finished(csv: Path, drawn: list[dict[str, float]]) -> list[dict[str, object]]:
-    """The rows of an earlier run kept in ``csv``: its first truths, where they are the
-    truths drawn now (same count and seed), in order."""
-    if not csv.exists():
-        return []
-    rows: list[dict[str, object]] = []
-    for row in pd.read_csv(csv).to_dict("records"):
-        i = len(rows)
-        same = i < len(drawn) and all(
-            np.isclose(float(row[f"{k}_true"]), drawn[i][k], rtol=1e-12) for k in PRIORS
-        )
-        if int(row["truth"]) != i or not same:
-            break
-        rows.append({str(k): v for k, v in row.items()})
-    return rows
 
 
 def summary(table: pd.DataFrame, title: str) -> None:

@@ -212,3 +212,20 @@ def test_a_completion_skipped_for_failed_runs_is_said() -> None:
     assert warning is not None
     assert "raise [predict] check_runs" in warning
     assert "set [predict] off_basis" not in warning
+
+
+def test_a_completed_centre_that_still_misses_is_said() -> None:
+    """The warning follows the completed centre's held-out error where the centre is
+    completed, and names what to raise; within the tolerance it is silent."""
+    part = {"q": (np.zeros(4), np.zeros(4))}
+    check = RouteCheck("emulator", {"q": 0.1}, 5, "test", 0.3, {"q": 1.2}, {"q": 0.5}, part)
+    assert check.completes
+    warning = check.warning()
+    assert warning is not None
+    assert "completed with the held-out runs' mean part off the output basis, still" in warning
+    assert "q 0.50 x the noise SD" in warning
+    assert "raise [predict] check_runs" in warning
+    quiet = RouteCheck("emulator", {"q": 0.1}, 5, "test", 0.3, {"q": 1.2}, {"q": 0.2}, part)
+    assert quiet.warning() is None  # the centre left on the basis (1.2) is not the band's
+    simulator = RouteCheck("simulator", {"q": 0.4}, 5, "test", 0.3, {"q": 1.2}, {"q": 0.5}, part)
+    assert simulator.warning() is None

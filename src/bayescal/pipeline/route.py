@@ -139,36 +139,34 @@ class RouteCheck:
     def warning(self) -> str | None:
         """A warning where the emulator route's centre misses the whole runs by more than
         the tolerance (the part off the output basis), else ``None``."""
-        if self.completes:
-            over = {o: c for o, c in self.completed.items() if c > self.tolerance}
-            if not over:
-                return None
-            worst = ", ".join(f"{o} {c:.2f}" for o, c in over.items())
-            return (
-                f"the emulator route's centre, completed with the held-out runs' mean part "
-                f"off the output basis, still misses the {self.runs} held-out runs by "
-                f"{worst} x the noise SD on the {self.window} window (each run against the "
-                "others' mean part): that part varies over the posterior; its RMSE and "
-                "CV(RMSE) are worse than the simulator route's would be; for Guideline 14 "
-                "figures set [predict] method = 'simulator' (or raise [emulator] "
-                "pca_variance, or [predict] check_runs)"
-            )
-        over = {o: c for o, c in self.centre.items() if c > self.tolerance}
+        figures = self.completed if self.completes else self.centre
+        over = {o: c for o, c in figures.items() if c > self.tolerance}
         if self.route != "emulator" or not over:
             return None
         worst = ", ".join(f"{o} {c:.2f}" for o, c in over.items())
-        return (
-            f"the emulator route's centre leaves out the runs' part off the output basis: it "
-            f"misses the {self.runs} held-out runs by {worst} x the noise SD on the "
-            f"{self.window} window; its bands hold that part, but its RMSE and CV(RMSE) are "
-            "worse than the simulator route's would be; for Guideline 14 figures set "
-            "[predict] method = 'simulator' (or raise [emulator] pca_variance"
-            + (
-                ", or raise [predict] check_runs"
-                if self.skipped
-                else ", or set [predict] off_basis = 'check_runs'"
+        if self.completes:
+            what = (
+                "the emulator route's centre, completed with the held-out runs' mean part off "
+                f"the output basis, still misses the {self.runs} held-out runs by {worst} x the "
+                f"noise SD on the {self.window} window (each run against the others' mean "
+                "part): that part varies over the posterior"
             )
-            + ")"
+            fix = "or raise [predict] check_runs"
+        else:
+            what = (
+                "the emulator route's centre leaves out the runs' part off the output basis: it "
+                f"misses the {self.runs} held-out runs by {worst} x the noise SD on the "
+                f"{self.window} window; its bands hold that part"
+            )
+            fix = (
+                "or raise [predict] check_runs"
+                if self.skipped
+                else "or set [predict] off_basis = 'check_runs'"
+            )
+        return (
+            f"{what}, but its RMSE and CV(RMSE) are worse than the simulator route's would be; "
+            "for Guideline 14 figures set [predict] method = 'simulator' (or raise [emulator] "
+            f"pca_variance, {fix})"
         )
 
 
