@@ -138,7 +138,9 @@ def local_time_problem(value: datetime | pd.Timestamp, zone: tzinfo) -> tuple[st
         ``2013-10-27T02:30:00``.
     """
     ts = pd.Timestamp(value)
-    if ts.tz is not None or not pd.isna(ts.tz_localize(zone, ambiguous="NaT", nonexistent="NaT")):
+    if pd.isna(ts) or ts.tz is not None:  # no time, or one with its own offset
+        return None
+    if not pd.isna(ts.tz_localize(zone, ambiguous="NaT", nonexistent="NaT")):
         return None
     text, day = f"{ts:%Y-%m-%dT%H:%M:%S}", f"{ts:%Y-%m-%d}"
     if pd.isna(ts.tz_localize(zone, ambiguous="NaT", nonexistent="shift_forward")):

@@ -230,3 +230,13 @@ def test_cli_predict_names_the_window_option(tmp_path: Path, option: str, value:
 def test_cli_update_names_its_to_option(tmp_path: Path) -> None:
     out = _one_line(["update", str(_cli_folder(tmp_path)), "--to", SKIPPED])
     assert f"error: --to: {SKIPPED} does not exist in time zone Europe/Berlin, {GAP}" in out
+
+
+@pytest.mark.parametrize("value", ["", "NaT", "nat"])
+def test_cli_an_empty_or_nat_window_is_one_line(tmp_path: Path, value: str) -> None:
+    """pandas reads these as no time at all (no ValueError): still a one-line error."""
+    folder = _cli_folder(tmp_path)
+    out = _one_line(["predict", str(folder), "--data", str(folder / "wall.csv"), "--from", value])
+    assert f"error: --from {value!r} is not a date and time" in out
+    out = _one_line(["update", str(folder), "--to", value])
+    assert f"error: --to {value!r} is not a date and time" in out

@@ -16,7 +16,7 @@ more at the default with ``off_basis = "none"``. The tests check
   error at the held-out runs, against their part on the output basis, over the
   noise SD), and follows the ratio: the emulator route exactly where the ratio is
   at most the tolerance; the ratio is the same at both tolerances, the default
-  takes the emulator route at 8 of 10 truths or more (this wall's emulator is
+  takes the emulator route at all truths but one or more (this wall's emulator is
   accurate) and the tight one the simulator route at every truth;
 * at each tolerance, pooled over the truths, the calibrated 95 % band covers the
   measured samples of the test window (and of the training periods) within
@@ -253,7 +253,7 @@ def test_the_route_follows_the_measured_error(cases: tuple[Case, ...]) -> None:
     # the same posterior and held-out runs: the same measured error at both tolerances
     assert [p.ratio for p in default] == [p.ratio for p in tight]
     # the emulator of this wall is accurate: the default takes its route at most truths
-    assert sum(p.route == "emulator" for p in default) >= 0.8 * len(default), [
+    assert sum(p.route == "emulator" for p in default) >= len(default) - 1, [
         p.said for p in default
     ]
     assert all(p.route == "simulator" for p in tight), [p.said for p in tight]

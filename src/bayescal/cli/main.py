@@ -124,8 +124,9 @@ def _parse_assignments(values: tuple[str, ...]) -> dict[str, float]:
 
 
 def _local_time(option: str, text: str | None, zone: tzinfo) -> pd.Timestamp | None:
-    """The time ``--from``/``--to`` gives: naive, a local time of the data's ``zone``, in
-    which the hour that a daylight-saving change repeats or skips is refused by name."""
+    """The time ``--from``/``--to`` gives: a local time of the data's ``zone`` (unless it
+    carries its own UTC offset), in which the hour that a daylight-saving change repeats
+    or skips is refused by name; an empty text or ``NaT`` is not a time."""
     import pandas as pd
 
     from bayescal.clock import local_to_utc
@@ -133,12 +134,13 @@ def _local_time(option: str, text: str | None, zone: tzinfo) -> pd.Timestamp | N
 
     if text is None:
         return None
+    bad = ConfigError(f"{option} {text!r} is not a date and time", hint="e.g. 2013-09-20T00:00")
     try:
         value = pd.Timestamp(text)
     except ValueError:
-        raise ConfigError(
-            f"{option} {text!r} is not a date and time", hint="e.g. 2013-09-20T00:00"
-        ) from None
+        raise bad from None
+    if pd.isna(value):  # pandas reads "", "NaT" and "nat" as no time at all
+        raise bad
     local_to_utc(value, zone, option)
     return value
 

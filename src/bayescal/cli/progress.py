@@ -25,7 +25,6 @@ import numpy as np
 import pandas as pd
 
 from bayescal.metrics import KEY_COLUMNS, Metrics, band_notes, metric_columns
-from bayescal.report.answer import route_used
 from bayescal.runner import Progress
 
 if TYPE_CHECKING:
@@ -311,6 +310,8 @@ def describe(res: Results) -> str:
         ]
         cols = [c for c in cols if c in m.columns]  # older runs lack newer columns
         lines.append(m[cols].to_string(index=False, float_format="{:.4g}".format))
+        from bayescal.report.answer import route_used  # matplotlib: not at import time
+
         attrs = dict(res.predictions.dataset.attrs)
         level = float(attrs.get("level", 0.95))
         lines.append(f"  bands from {route_used(attrs)}")

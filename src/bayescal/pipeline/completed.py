@@ -28,8 +28,9 @@ the basis from the mean, which the two variances above add once more:
 conservative, and small where ``auto`` takes this route) and an in-likelihood
 discrepancy kriged from those residuals. No simulator run is made beyond the
 held-out ones. The corrected prediction (the difference process) is not made
-here: Delta was estimated against the emulator's centre on the basis and already
-holds the part off it (:func:`bayescal.pipeline.stages.predict_stage`).
+here: Delta was estimated against the emulator's centre on the basis, so what of
+the part off it Delta's own basis holds is in Delta already
+(:func:`bayescal.pipeline.stages.predict_stage`; not measured with the completion).
 
 The part off the basis varies with theta; over the posterior's narrow region
 it varies little, which the route check measures: each held-out run against
@@ -117,8 +118,7 @@ def completed_band(
     emulator, assembled
         The trained emulator and the assembled data.
     posterior
-        theta* and lambda* draws (of the difference-process phase for the
-        corrected prediction).
+        theta* and lambda* draws of the calibration.
     off_basis
         Output name -> the held-out runs' mean part off the output basis and the
         variance of one more run's part, ``(n_total,)`` each, on the level scale
@@ -131,7 +131,8 @@ def completed_band(
     noise
         ``[predict] noise`` (:func:`bayescal.pipeline.simnoise.simulator_noise`).
     discrepancy
-        A fitted difference process to add (``None``: the model alone).
+        A fitted difference process to add (``None``, as the pipeline calls it: the
+        model alone; the corrected prediction is not completed).
     measured
         Output name -> measured series ``(n_total,)`` for the PIT (optional).
     transforms

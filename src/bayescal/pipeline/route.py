@@ -11,8 +11,11 @@ is compared with their part on the output basis (what the emulator predicts: its
 band holds the part off the basis apart) on the test window. Those runs are held
 out: the emulator never saw them. When the root mean squared difference of every
 calibrated output is at most ``[predict] check_tolerance`` times the output's
-posterior noise SD,
-the emulator route gives the bands; otherwise the simulator route does. Without
+noise SD (with ``off_basis = "check_runs"``, the default, the noise the completed
+band uses, estimated again from the held-out runs; with ``"none"`` the
+calibration's posterior noise SD, from lambda*, which also holds the part off
+the basis and so reads each error smaller), the emulator route gives the bands;
+otherwise the simulator route does. Without
 a test window the training periods are compared instead.
 
 With an emulator error of ``c`` noise SDs the band's centre is off by about
@@ -64,7 +67,7 @@ class RouteCheck:
         ``"emulator"`` or ``"simulator"``.
     ratio
         Output -> the emulator's RMS error at the held-out runs over the output's
-        posterior noise SD.
+        noise SD (which noise: below).
     runs
         Held-out runs that succeeded.
     window
@@ -74,7 +77,7 @@ class RouteCheck:
     centre
         Output -> the RMS difference between the emulator's centre and the whole
         held-out runs (the part off the output basis included) over the output's
-        posterior noise SD.
+        noise SD.
     completed
         Output -> the same for the centre completed with the part off the basis,
         each run's centre with the *other* held-out runs' mean part (held out;
@@ -149,14 +152,14 @@ class RouteCheck:
                 "the emulator route's centre, completed with the held-out runs' mean part off "
                 f"the output basis, still misses the {self.runs} held-out runs by {worst} x the "
                 f"noise SD on the {self.window} window (each run against the others' mean "
-                "part): that part varies over the posterior"
+                "part: that part varies over the posterior)"
             )
             fix = "or raise [predict] check_runs"
         else:
             what = (
                 "the emulator route's centre leaves out the runs' part off the output basis: it "
                 f"misses the {self.runs} held-out runs by {worst} x the noise SD on the "
-                f"{self.window} window; its bands hold that part"
+                f"{self.window} window (its bands hold that part)"
             )
             fix = (
                 "or raise [predict] check_runs"
@@ -164,7 +167,7 @@ class RouteCheck:
                 else "or set [predict] off_basis = 'check_runs'"
             )
         return (
-            f"{what}, but its RMSE and CV(RMSE) are worse than the simulator route's would be; "
+            f"{what}; its RMSE and CV(RMSE) are worse than the simulator route's would be; "
             "for Guideline 14 figures set [predict] method = 'simulator' (or raise [emulator] "
             f"pca_variance, {fix})"
         )
