@@ -157,27 +157,50 @@ def local_time_problem(value: datetime | pd.Timestamp, zone: tzinfo) -> tuple[st
             f"write the one meant with its offset, '{text}{offsets[0][3:]}' or "
             f"'{text}{offsets[1][3:]}', or give a time outside the repeated {noun}",
         )
-    # the last instant before the change; pandas' "shift_forward" assumes an hour's skip
-    before = ts.tz_localize(zone, nonexistent="shift_backward")
-    after = before.tz_convert("UTC").ceil("min").tz_convert(zone)
-    skipped = (after.utcoffset() or timedelta()) - (before.utcoffset() or timedelta())
-    standard = offset_text(before.utcoffset() or timedelta())
+    start, end = _gap(ts, zone)
+    skipped = (end.utcoffset() or timedelta()) - (start.utcoffset() or timedelta())
+    standard = offset_text(start.utcoffset() or timedelta())
     span, noun = _span(skipped)
     return (
         f"{text} does not exist in time zone {zone}, whose clocks skip {span} "
-        f"from {after.tz_localize(None) - skipped:%H:%M} to {after:%H:%M} on {day}",
+        f"from {end.tz_localize(None) - skipped:%H:%M} to {end:%H:%M} on {day}",
         f"give a time outside the skipped {noun} (e.g. "
-        f"'{after:%Y-%m-%dT%H:%M:%S}', {after.tz_convert('UTC'):%H:%M} UTC), or, if the "
+        f"'{end:%Y-%m-%dT%H:%M:%S}', {end.tz_convert('UTC'):%H:%M} UTC), or, if the "
         "data's clock keeps standard time all year, set data.time_zone to its fixed offset "
         f"'{standard}'",
     )
+
+
+def _gap(ts: pd.Timestamp, zone: tzinfo) -> tuple[pd.Timestamp, pd.Timestamp]:
+    """The last instant before and the first after the clock change that skips the local
+    time ``ts`` (aware, in ``zone``), found by bisection in UTC to the second: pandas'
+    ``nonexistent`` shifts assume a skip of one hour (Antarctica/Troll skips two)."""
+    wall = ts.to_pydatetime()
+    before = wall.replace(tzinfo=zone, fold=0).utcoffset() or timedelta()
+    after = wall.replace(tzinfo=zone, fold=1).utcoffset() or timedelta()
+    low, high = sorted((ts - after, ts - before))  # the change lies between (naive UTC)
+    low, high = low - timedelta(days=1), high + timedelta(days=1)
+
+    def offset(utc: pd.Timestamp) -> timedelta:
+        return utc.tz_localize("UTC").tz_convert(zone).utcoffset() or timedelta()
+
+    first = offset(low)
+    while high - low > timedelta(seconds=1):
+        middle = low + (high - low) / 2
+        low, high = (middle, high) if offset(middle) == first else (low, middle)
+    end = high.tz_localize("UTC").tz_convert(zone)
+    return end - timedelta(seconds=1), end
 
 
 def _span(change: timedelta) -> tuple[str, str]:
     """``("an hour", "hour")``, ``("by 30 minutes", "30 minutes")``: how far a
     daylight-saving change moves the clocks, and the stretch it repeats or skips."""
     minutes = round(change.total_seconds() / 60)
-    return ("an hour", "hour") if minutes == 60 else (f"by {minutes} minutes", f"{minutes} minutes")
+    if minutes == 60:
+        return "an hour", "hour"
+    if minutes % 60 == 0:
+        return f"by {minutes // 60} hours", f"{minutes // 60} hours"
+    return f"by {minutes} minutes", f"{minutes} minutes"
 
 
 def local_to_utc(value: datetime | pd.Timestamp, zone: tzinfo, what: str) -> pd.Timestamp:
