@@ -314,7 +314,8 @@ def describe(res: Results) -> str:
 
         attrs = dict(res.predictions.dataset.attrs)
         level = float(attrs.get("level", 0.95))
-        lines.append(f"  bands from {route_used(attrs)}")
+        if attrs.get("route"):  # predictions of an earlier bayescal do not record it
+            lines.append(f"  bands from {route_used(attrs)}")
         lines += [f"  note: {n}" for n in band_notes(m, level=level)]
         lines.append(TEST_WINDOW_NOTE)
     if res.simulations is not None and res.simulations.failures:
