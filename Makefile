@@ -38,14 +38,20 @@ test: $(STAMP)
 
 # The slow tests (full-size statistical and physics runs, the case studies) except the
 # coverage experiments of tests/validation, which `make validate` runs at full size.
+# Files spread over one worker per core as in `make test`; the 20 slowest tests are
+# listed at the end (CI's 90-minute budget holds all three targets).
 test-slow: $(STAMP)
-	$(BIN)/python -m pytest -m slow --ignore=tests/validation
+	$(BIN)/python -m pytest -m slow --ignore=tests/validation -n $(PYTEST_WORKERS) \
+		--dist loadfile --durations=20
 
 # The coverage experiments of tests/validation (all marked slow) at the size of issue
-# 15's acceptance.
+# 15's acceptance, the tests spread over one worker per core (one BLAS thread each); tests
+# that share a module fixture or a cached experiment carry one xdist_group mark and run
+# on one worker.
 validate: $(STAMP)
 	OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 BAYESCAL_VALIDATION_TRUTHS=10 \
-		$(BIN)/python -m pytest tests/validation
+		$(BIN)/python -m pytest tests/validation -n $(PYTEST_WORKERS) --dist loadgroup \
+		--durations=20
 
 # The same as `make test` (kept for those who type it).
 test-fast: test

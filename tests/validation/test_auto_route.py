@@ -81,7 +81,9 @@ ROUTES = ("emulator", "simulator")
 #: (``[predict] off_basis = "none"``).
 TOLERANCES = {"default": None, "tight": 0.01, "basis": None}
 
-pytestmark = pytest.mark.slow
+#: One worker runs every test of this file (they share its module fixtures): `make
+#: validate` spreads the tests over workers by `--dist loadgroup`.
+pytestmark = [pytest.mark.slow, pytest.mark.xdist_group("auto-route")]
 
 
 @dataclass(frozen=True)

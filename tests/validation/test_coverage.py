@@ -138,7 +138,12 @@ def _bands_hold(
         assert lo50 <= c50 <= hi50, (window, c50, lo50, hi50)
 
 
-@pytest.mark.parametrize("name", ["white", "ar1"])
+#: The "ar1" experiment is computed once (``results`` is cached per process): the two tests
+#: that read it run on one worker under ``make validate``'s ``--dist loadgroup``.
+AR1_WORKER = pytest.mark.xdist_group("coverage-ar1")
+
+
+@pytest.mark.parametrize("name", ["white", pytest.param("ar1", marks=AR1_WORKER)])
 def test_intervals_and_bands_cover_at_their_rates(name: str) -> None:
     cases = results(name)
     hits = [ok for c in cases for ok in c.covered.values()]
@@ -159,6 +164,7 @@ def test_intervals_and_bands_cover_at_their_rates(name: str) -> None:
     _bands_hold(cases, phi, route="emulator")
 
 
+@AR1_WORKER
 def test_the_white_model_fails_on_correlated_noise() -> None:
     hits = [ok for c in results("white-on-ar1") for ok in c.covered.values()]
     assert sum(hits) < binomial_floor(len(hits)), hits

@@ -21,7 +21,9 @@ import pytest
 from bayescal.calibration.posterior import Posterior
 from split_wall import NOISE_SD, OUTPUTS, TRUTH, board_share, calibrate_split
 
-pytestmark = pytest.mark.slow
+#: One worker runs every test of this file (they share its module fixtures): `make
+#: validate` spreads the tests over workers by `--dist loadgroup`.
+pytestmark = [pytest.mark.slow, pytest.mark.xdist_group("several-sensors")]
 Result = tuple[Posterior, dict[str, dict[str, tuple[float, float]]]]
 
 
