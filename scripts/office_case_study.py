@@ -4,11 +4,12 @@ The numbers of ``docs/case-studies.md`` (section "A whole building") come from
 this script. It copies the ``office`` example into ``out/case-studies/office``
 (as ``bayescal init office`` does), then runs what a modeller runs:
 
-1. ``bayescal screen --apply``: Morris elementary effects of the 21 candidates
-   (``[screening]``: 10 trajectories, 220 EnergyPlus runs); the proposed
-   parameters get ``screen = false``;
-2. ``bayescal run``: design (``[design] runs``), EnergyPlus runs, emulator,
-   calibration, predictions, report;
+1. ``bayescal screen --apply``: Sobol indices of a GP fitted to 42 EnergyPlus runs
+   over the 21 candidates (``[screening]``); the proposed parameters get
+   ``screen = false``;
+2. ``bayescal run``: a sequential design whose first runs are the screening's
+   (``[design]``), EnergyPlus runs, emulator, calibration, predictions
+   (``[predict] method = "auto"``), report;
 
 and prints the screening ranks, the posterior against the hidden truth
 (:data:`make_office_example.TRUTH`; the other candidates are at their
@@ -21,12 +22,16 @@ Usage::
     OPENBLAS_NUM_THREADS=1 python scripts/office_case_study.py [--fresh] [--jobs N]
         [--backend processes|dask] [--scheduler ADDRESS] [--out DIR] [--markdown]
 
-``--few-runs`` switches to issue 36's settings (Sobol screening on 42 runs, fewer
-design runs); with ``--reuse`` the screening's runs join the design (``[design]
+``--morris`` runs the settings the example shipped with before (Morris screening,
+10 trajectories: 220 runs, at most 8 parameters; a one-shot design of 150 runs;
+predictions by EnergyPlus at 30 posterior draws): about 400 runs, the baseline of
+issue 36. ``--few-runs`` switches to the variants tried on the way (Sobol screening
+on 42 runs, fewer design runs); with ``--reuse`` the screening's runs join the design (``[design]
 reuse_screening = true``) and, without ``--design-runs``, the new runs are set from the
 screening: 10 per calibrated parameter in all, the screening's counted; with
 ``--reuse --sequential`` the screening's runs and 12 new ones are the first design of a
-sequential design (batches of 12, at most 10 runs per calibrated parameter in all).
+sequential design (batches of 12, at most 10 runs per calibrated parameter in all:
+the shipped settings with ``--max-parameters 9``).
 
 Running it again reuses the cached EnergyPlus runs and every finished stage;
 ``--fresh`` starts from an empty folder.
@@ -145,6 +150,22 @@ def _few_runs(
     path.write_text(tomli_w.dumps(data), encoding="utf-8")
 
 
+def _morris(path: Path) -> None:
+    """Switch a fresh copy of the office study to the settings it shipped with before
+    issue 36: Morris screening (220 runs), a one-shot design of 150, the simulator route."""
+    data = tomllib.loads(path.read_text(encoding="utf-8"))
+    data["screening"] = {
+        "trajectories": 10,
+        "levels": 4,
+        "statistic": "mean",
+        "threshold": 0.15,
+        "max_parameters": 8,
+    }
+    data["design"] = {"runs": 150}
+    data["predict"] = {**data["predict"], "method": "simulator"}
+    path.write_text(tomli_w.dumps(data), encoding="utf-8")
+
+
 def _reuse_runs(path: Path, screening_runs: int) -> None:
     """Set ``[design] runs`` from the screening: 10 runs per calibrated parameter in all
     (Loeppky et al. 2009's rule for a GP emulator), the screening's hypercube counted
@@ -165,6 +186,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--backend", choices=["processes", "dask"], default=None)
     parser.add_argument("--scheduler", default=None, help="Dask scheduler address")
     parser.add_argument("--markdown", action="store_true", help="print Markdown tables")
+    parser.add_argument(
+        "--morris",
+        action="store_true",
+        help="the settings shipped before issue 36: Morris screening (220 runs, at most 8 "
+        "parameters), a one-shot design of 150 runs, predictions by EnergyPlus at 30 draws",
+    )
     parser.add_argument(
         "--few-runs",
         action="store_true",
@@ -201,11 +228,15 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if args.sequential and not (args.few_runs and args.reuse and args.design_runs is None):
         parser.error("--sequential needs --few-runs --reuse and no --design-runs")
+    if args.morris and args.few_runs:
+        parser.error("--morris and --few-runs are two different settings; give one")
     folder: Path = args.out
     if args.fresh and folder.exists():
         shutil.rmtree(folder)
     if not (folder / "study.toml").is_file():
         copy_example("office", folder)
+        if args.morris:
+            _morris(folder / "study.toml")
         if args.few_runs:
             _few_runs(
                 folder / "study.toml",

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import pickle
 
@@ -142,6 +143,43 @@ def test_the_map_search_finds_the_best_optimum_and_the_subset_route_agrees() -> 
     sub = find_map(post, seed=1, settings=MapSettings(explore_runs=5))
     assert sub.value == pytest.approx(full.value, abs=1e-3)
     assert all(len(s.polished) >= 1 for s in sub.searches)
+
+
+def test_a_warm_search_from_the_map_returns_it_with_two_starts_per_basis() -> None:
+    """Warm starts at the full search's optima: the same MAP, two starts per basis on
+    all runs instead of the multi-start search; a warm block for the first basis only
+    leaves the others to the full search; a block of the wrong length is an error."""
+    theta, x, w, ktk = _small(9)
+    post = LogScalePosterior(theta, x, w, ktk, LAM_PRIOR)
+    full = find_map(post, seed=1)
+    blocks = [s.u for s in full.searches]
+    warm = find_map(post, seed=1, warm=blocks)
+    assert warm.value == pytest.approx(full.value, abs=1e-6)
+    assert [len(s.optima) for s in warm.searches] == [2, 2]
+    assert sum(s.evaluations[1] for s in warm.searches) < sum(
+        sum(s.evaluations) for s in full.searches
+    )
+    # From a poor start (every beta 1e-3) the neutral start still finds the optimum.
+    poor = [np.full_like(b, math.log(1e-3)) for b in blocks]
+    assert find_map(post, seed=1, warm=poor).value >= full.value - 0.05
+    half = find_map(post, seed=1, warm=blocks[:1])
+    assert len(half.searches[0].optima) == 2
+    assert len(half.searches[1].optima) > 2
+    with pytest.raises(ValueError, match="blocks of length r \\+ 1"):
+        find_map(post, warm=[blocks[0][:-1]])
+
+
+def test_train_warm_from_itself_keeps_its_map_and_ignores_other_inputs(
+    small: Assembled,
+) -> None:
+    """``train(warm=...)``: from the emulator's own MAP the same MAP (to the search's
+    tolerance); an emulator of other inputs is ignored (the full search)."""
+    cold = train(small, method="map", seed=4, n_draws=10)
+    again = train(small, method="map", seed=4, n_draws=10, warm=cold)
+    assert again.log_post_map == pytest.approx(cold.log_post_map, abs=0.01)
+    other = dataclasses.replace(cold, input_labels=(*cold.input_labels[:-1], "other"))
+    ignored = train(small, method="map", seed=4, n_draws=10, warm=other)
+    assert ignored.log_post_map == cold.log_post_map
 
 
 @pytest.fixture(scope="module")

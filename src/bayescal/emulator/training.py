@@ -243,6 +243,14 @@ class _Progress:
             self.callback(min(self.total, round(self.total * done / self.parts)))
 
 
+def _warm_blocks(warm: Emulator | None, assembled: Assembled) -> tuple[FloatArray, ...]:
+    """``ln [beta_j, tau_j]`` of each basis of ``warm`` (none where its inputs differ)."""
+    if warm is None or tuple(warm.input_labels) != tuple(assembled.input_labels):
+        return ()
+    blocks = np.column_stack([np.log(warm.beta), np.log(warm.tau)])
+    return tuple(blocks)
+
+
 def _fit_map(
     target: LogScalePosterior,
     n_draws: int,
@@ -250,10 +258,13 @@ def _fit_map(
     processes: int,
     settings: MapSettings | None,
     progress: _Progress,
+    warm: tuple[FloatArray, ...] = (),
 ) -> _Fit:
     """``method="map"``: multi-start L-BFGS-B, then the Laplace approximation."""
     layout = target.layout
-    found = find_map(target, seed=seed, settings=settings, processes=processes, callback=progress)
+    found = find_map(
+        target, seed=seed, settings=settings, processes=processes, callback=progress, warm=warm
+    )
     cov = laplace_covariance(laplace_hessian(target, found.u))
     draws = laplace_draws(found.u, cov, n_draws, np.random.default_rng([seed, 3]))
     progress(progress.parts)
@@ -285,6 +296,7 @@ def train(
     checkpoint_dir: str | os.PathLike[str] | None = None,
     checkpoint_seconds: float = 30.0,
     map_settings: MapSettings | None = None,
+    warm: Emulator | None = None,
 ) -> Emulator:
     """Train the emulator: the MAP of eq. 9 and the conditioned GP (method.md section 3).
 
@@ -329,6 +341,12 @@ def train(
         Minimum wall time between two snapshots of a chain. [s]
     map_settings
         ``"map"``: settings of the search (:class:`~bayescal.emulator.mapfit.MapSettings`).
+    warm
+        ``"map"``: an emulator of a similar problem (the same inputs, e.g. the
+        sequential design's previous step) whose MAP starts the search of each of
+        its bases (:func:`~bayescal.emulator.mapfit.find_map`, "Warm starts"): a
+        local search, much cheaper than the multi-start one. Ignored where its
+        inputs differ, and by ``"mcmc"``.
 
     Returns
     -------
@@ -345,7 +363,13 @@ def train(
         progress = _Progress(callback, n_chains * (n_burn + n_draws), p + 2)
         processes = default_processes(p) if backend in ("processes", "auto") else 1
         fit = _fit_map(
-            LogScalePosterior(*args, hp), n_draws, seed, processes, map_settings, progress
+            LogScalePosterior(*args, hp),
+            n_draws,
+            seed,
+            processes,
+            map_settings,
+            progress,
+            _warm_blocks(warm, assembled),
         )
     else:
         target = TrainingPosterior(*args, hp)

@@ -34,7 +34,14 @@ from bayescal.errors import BayescalError, ConfigError
 from bayescal.store import posterior as posterior_store
 from bayescal.store.stages import StageLog
 
-__all__ = ["FIT_WARN", "PriorFromDraws", "prior_from_draws", "study_priors", "warm_starts"]
+__all__ = [
+    "FIT_WARN",
+    "PriorFromDraws",
+    "prior_from_draws",
+    "spread_picks",
+    "study_priors",
+    "warm_starts",
+]
 
 #: Largest Kolmogorov-Smirnov distance of a marginal above which the fit is a warning.
 FIT_WARN = 0.05
@@ -135,15 +142,26 @@ def warm_starts(study: Study, n_chains: int) -> np.ndarray | None:
         return starts
     priors = list(own.values())
     unit = np.column_stack([priors[k].to_unit(flat[:, j]) for k, j in shared])
-    z = special.logit(np.clip(unit, 1e-9, 1 - 1e-9))
-    centred = z - z.mean(axis=0)
-    cov = np.atleast_2d(np.cov(centred, rowvar=False))
-    distance = np.einsum("ij,ij->i", centred @ np.linalg.pinv(cov), centred)
-    order = np.argsort(distance, kind="stable")
-    picks = order[((np.arange(n_chains) + 0.5) / n_chains * len(order)).astype(int)]
+    picks = spread_picks(unit, n_chains)
     for column, (k, _) in enumerate(shared):
         starts[:, k] = unit[picks, column]
     return starts
+
+
+def spread_picks(unit: np.ndarray, n: int) -> np.ndarray:
+    """Indices of ``n`` rows of ``unit`` (draws ``(rows, k)`` in ``(0, 1)``) spread from
+    the draws' centre to their tails: row ``k`` is the ``(k + 0.5) / n`` quantile of
+    the Mahalanobis distances from the mean in logit space (columns that do not vary
+    are left out of the distance)."""
+    z = special.logit(np.clip(unit, 1e-9, 1 - 1e-9))
+    centred = z - z.mean(axis=0)
+    centred = centred[:, np.ptp(centred, axis=0) > 0.0]
+    if centred.shape[1] == 0:
+        return np.zeros(n, dtype=int)
+    cov = np.atleast_2d(np.cov(centred, rowvar=False))
+    distance = np.einsum("ij,ij->i", centred @ np.linalg.pinv(cov), centred)
+    order = np.argsort(distance, kind="stable")
+    return order[((np.arange(n) + 0.5) / n * len(order)).astype(int)]
 
 
 def prior_from_draws(study: Study) -> PriorFromDraws | None:

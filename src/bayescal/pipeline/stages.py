@@ -332,9 +332,14 @@ def _mcmc_tick(ctx: Context, what: str, total: int) -> tuple[Tick | None, Callab
 
 
 def build_emulator(
-    ctx: Context, sims: RunResults, checkpoint_dir: Path | None = None
+    ctx: Context,
+    sims: RunResults,
+    checkpoint_dir: Path | None = None,
+    warm: EmulatorResult | None = None,
 ) -> EmulatorResult:
-    """Assemble, train the emulator (MwG + MAP) and cross-validate it."""
+    """Assemble, train the emulator (MwG + MAP) and cross-validate it; ``warm`` (an
+    emulator of the same inputs on fewer runs) starts the MAP search of each basis
+    from its MAP (:func:`bayescal.emulator.train`)."""
     assembled = assemble_runs(ctx, sims)
     section = ctx.study.emulator
     n_chains = 2
@@ -351,6 +356,7 @@ def build_emulator(
             callback=tick,
             checkpoint_dir=checkpoint_dir,
             checkpoint_seconds=ctx.options.checkpoint_seconds,
+            warm=None if warm is None else warm.emulator,
         )
     finally:
         close()
@@ -362,9 +368,11 @@ def calibrate_stage(
     em: EmulatorResult,
     priors: dict[str, Prior] | None = None,
     checkpoint_dir: Path | None = None,
+    starts: np.ndarray | None = None,
 ) -> Posterior:
-    """Sample theta*, lambda and lambda* (``[calibration]``); with ``[study] prior_from``
-    the chains start from the previous posterior's draws
+    """Sample theta*, lambda and lambda* (``[calibration]``); the chains start at
+    ``starts`` (``(chains, t)`` on the normalised scale, NaN: the default start) or,
+    with ``[study] prior_from``, from the previous posterior's draws
     (:func:`bayescal.pipeline.sequential.warm_starts`)."""
     from bayescal.pipeline import sequential  # looked up at call time (tests replace it)
 
@@ -398,7 +406,7 @@ def calibrate_stage(
             moves=section.moves,
             max_draws=section.most_samples,
             on_extend=extend,
-            starts=sequential.warm_starts(ctx.study, section.chains),
+            starts=sequential.warm_starts(ctx.study, section.chains) if starts is None else starts,
             fixed=ctx.held,
         )
     finally:
