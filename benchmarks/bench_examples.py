@@ -22,9 +22,9 @@ The ``office`` example (the DOE small office in EnergyPlus) is listed but not
 run unless asked for (``--office``, or by naming it): its study marks every
 parameter as a screening candidate, so ``bayescal run`` refuses it until
 ``bayescal screen --apply`` has chosen the parameters, and the two together are
-about 400 EnergyPlus runs, 9-12 minutes on the idle 2-core machine
+96 EnergyPlus runs, about 15 minutes on the 2-core machine
 (docs/case-studies.md; ``scripts/office_case_study.py`` prints its full
-results). Run, it goes the user's way: Morris screening with ``--apply``
+results). Run, it goes the user's way: Sobol screening with ``--apply``
 (its time is the ``screen`` column), then the pipeline; its end-to-end time
 includes the screening.
 
@@ -89,7 +89,7 @@ SHORT = {"calibrate": "cal", "discrepancy": "disc"}
 #: The example that screens before it runs, and why it is not run by default.
 OFFICE = "office"
 OFFICE_NOT_RUN = (
-    "not run: EnergyPlus, screen --apply then run, about 400 runs, ~9 min on 2 idle cores "
+    "not run: EnergyPlus, screen --apply then run, 96 runs, ~15 min on 2 cores "
     "(docs/case-studies.md); --office runs it, scripts/office_case_study.py gives its results"
 )
 
@@ -257,7 +257,7 @@ def main() -> int:
     parser.add_argument(
         "--office",
         action="store_true",
-        help="also run the office example (EnergyPlus: screen --apply, then run; ~9 min)",
+        help="also run the office example (EnergyPlus: screen --apply, then run; ~15 min)",
     )
     opts = parser.parse_args()
     names = list(opts.examples or available())

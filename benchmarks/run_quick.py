@@ -20,7 +20,7 @@ Runs, each in its own process so thread settings and imports stay clean:
   15 and 30 runs against a sequential one (about a minute; the full set, with the
   co-heating box, is ``bench_seqdesign.py`` alone);
 * ``bench_examples.py``: every worked example end to end, the examples table (the
-  EnergyPlus ``office`` example is listed as not run, with the reason: about 9
+  EnergyPlus ``office`` example is listed as not run, with the reason: about 15
   minutes of screening, runs and calibration; ``bench_examples.py --office`` runs it).
 
 Every script's output is shown as it runs; at the end the key lines are

@@ -233,6 +233,11 @@ def main(argv: list[str] | None = None) -> int:
     folder: Path = args.out
     if args.fresh and folder.exists():
         shutil.rmtree(folder)
+    if (args.morris or args.few_runs) and (folder / "study.toml").is_file():
+        print(
+            f"{folder / 'study.toml'} exists and keeps its settings: --morris and --few-runs "
+            "apply to a fresh copy (add --fresh)"
+        )
     if not (folder / "study.toml").is_file():
         copy_example("office", folder)
         if args.morris:

@@ -33,9 +33,7 @@ import predict_truths
 
 N_TRUTHS = int(os.environ.get("BAYESCAL_VALIDATION_TRUTHS", "2"))
 
-#: One worker runs every test of this file (they share its module fixtures): `make
-#: validate` spreads the tests over workers by `--dist loadgroup`.
-pytestmark = [pytest.mark.slow, pytest.mark.xdist_group("predict-new")]
+pytestmark = pytest.mark.slow
 
 
 VARIANTS = {

@@ -7,12 +7,14 @@ et al. 2018, Sürer, Plumlee and Wild 2024):
 1. a first Latin hypercube of ``[design] runs`` runs over the priors' bounds;
 2. the runs are simulated (cached per run, in parallel on the study's backend),
    the emulator is trained on every run so far and a short calibration
-   (``[calibration]`` chains, at most 300 + 300 sweeps of one-coordinate moves, no
-   extension) gives the current posterior. From the second step on, the emulator's MAP search starts
-   each basis from the previous step's MAP (a local search: the same inputs, a
-   few more runs; :func:`bayescal.emulator.mapfit.find_map`, "Warm starts") and
-   the chains start at the previous posterior's draws, spread from its centre
-   to its tails, with a burn-in of at most :data:`WARM_BURN` sweeps. The design
+   (``[calibration]`` chains, at most 300 + 300 sweeps, no extension) gives the
+   current posterior. From the second step on in one process, the emulator's MAP
+   search starts each basis from the previous step's MAP (a local search: the
+   same inputs, a few more runs; :func:`bayescal.emulator.mapfit.find_map`,
+   "Warm starts") and the chains start at the previous posterior's draws, spread
+   from its centre to its tails (their proposal widths are adapted over the
+   whole burn-in as before: a start near the posterior does not tell them). A
+   resumed design's first step starts cold. The design
    stage's result is the design only: the emulator stage trains its emulator
    on it with the full search;
 3. a batch of ``[design] batch`` runs is chosen among the current posterior's
@@ -89,8 +91,10 @@ from bayescal.runner import RunResults
 __all__ = [
     "HISTORY_FILE",
     "STATE_FILE",
+    "STEP_PARTS",
     "Step",
     "batch_differences",
+    "chain_starts",
     "choose_batch",
     "error_ratios",
     "posterior_shift",
@@ -107,8 +111,6 @@ HISTORY_FILE = Path("sequential") / "history.csv"
 QUICK_SWEEPS = 300
 #: The parts of a step whose wall seconds the history records.
 STEP_PARTS = ("simulate", "emulator", "calibration")
-#: Burn-in sweeps of a short calibration whose chains start at the previous posterior's draws.
-WARM_BURN = 100
 #: Candidate posterior draws scored for a batch.
 CANDIDATES = 400
 #: Batches in a row without a new smallest shift after which the design stops: the
@@ -140,8 +142,9 @@ class Step:
         Posterior mean and SD of each calibrated parameter (physical units) from
         the short calibration on these runs (NaN where the loop stopped before it).
     seconds
-        Wall seconds of the step's parts: ``simulate``, ``emulator``, ``calibration``
-        (empty in a history written before they were recorded).
+        Wall seconds of the step's main parts: its runs (``simulate``), its emulator
+        and its short calibration (empty in a history written before they were
+        recorded; the batch's choice and the error measures are not counted).
     """
 
     runs: int
@@ -161,20 +164,9 @@ def _quick(ctx: Context) -> Context:
             "burn": min(cal.burn, QUICK_SWEEPS),
             "samples": min(cal.samples, QUICK_SWEEPS),
             "max_samples": min(cal.samples, QUICK_SWEEPS),
-            # joint moves learn their covariance over a long burn-in; chains this short
-            # move each coordinate alone (on the office, 4 x (100 + 300) sweeps from the
-            # previous posterior: 38 s against 57 s with joint moves)
-            "moves": "gibbs",
         }
     )
     return dataclasses.replace(ctx, study=ctx.study.model_copy(update={"calibration": quick}))
-
-
-def _warm(quick: Context) -> Context:
-    """The loop's short calibration with the burn-in of chains started near the posterior."""
-    cal = quick.study.calibration
-    shorter = cal.model_copy(update={"burn": min(cal.burn, WARM_BURN)})
-    return dataclasses.replace(quick, study=quick.study.model_copy(update={"calibration": shorter}))
 
 
 def chain_starts(post: Posterior, em: EmulatorResult, n_chains: int) -> np.ndarray:
@@ -589,9 +581,10 @@ def sequential_design(ctx: Context, key: str, say: Say) -> tuple[Design, list[St
         seconds: dict[str, float] = {}
         tick = time.perf_counter()
         sims = simulate(ctx, design)
-        seconds["simulate"], tick = time.perf_counter() - tick, time.perf_counter()
+        seconds["simulate"] = time.perf_counter() - tick
+        tick = time.perf_counter()
         em = build_emulator(quick, sims, warm=None if previous is None else previous[0])
-        seconds["emulator"], tick = time.perf_counter() - tick, time.perf_counter()
+        seconds["emulator"] = time.perf_counter() - tick
         ratio: dict[str, float] = {o: float("nan") for o in outputs}
         shift = float("nan")
         batch_rows = np.arange(state.batch_start, len(state.unit))
@@ -622,11 +615,12 @@ def sequential_design(ctx: Context, key: str, say: Say) -> tuple[Design, list[St
         sd: dict[str, float] = {}
         post: Posterior | None = None
         if not (done or full or over_time or stalled):
+            tick = time.perf_counter()
             if previous is None:
                 post = calibrate_stage(quick, em)
             else:
                 starts = chain_starts(previous[1], em, quick.study.calibration.chains)
-                post = calibrate_stage(_warm(quick), em, starts=starts)
+                post = calibrate_stage(quick, em, starts=starts)
             mean, sd = _posterior_summary(post)
             seconds["calibration"] = time.perf_counter() - tick
         step = Step(design.runs, len(sims.indices), ratio, mean, sd, shift, seconds)
