@@ -45,11 +45,12 @@ test-slow: $(STAMP)
 		--dist loadfile --durations=20
 
 # The coverage experiments of tests/validation (all marked slow) at the size of issue
-# 15's acceptance, the tests spread over one worker per core (one BLAS thread each); tests
-# that share a module fixture or a cached experiment carry one xdist_group mark and run
-# on one worker.
+# 15's acceptance (VALIDATION_TRUTHS truths per experiment; CI runs fewer, .ci/run), the
+# tests spread over one worker per core (one BLAS thread each); tests that share a module
+# fixture or a cached experiment carry one xdist_group mark and run on one worker.
+VALIDATION_TRUTHS ?= 10
 validate: $(STAMP)
-	OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 BAYESCAL_VALIDATION_TRUTHS=10 \
+	OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 BAYESCAL_VALIDATION_TRUTHS=$(VALIDATION_TRUTHS) \
 		$(BIN)/python -m pytest tests/validation -n $(PYTEST_WORKERS) --dist loadgroup \
 		--durations=20
 

@@ -13,6 +13,8 @@ windows.
 
 from __future__ import annotations
 
+import hashlib
+import pickle
 from dataclasses import dataclass
 
 import numpy as np
@@ -37,6 +39,7 @@ from nonlinear_wall import ConductivityWall
 from virtual_wall import (
     NOISE_VARIANCE,
     PRIORS,
+    VirtualExperiment,
     paper_wall,
     random_truth,
     simulate,
@@ -47,6 +50,26 @@ from virtual_wall import (
 TRAIN_DAYS, TEST_DAYS = 20, 4
 BAND_RUNS = 40
 EMULATOR_DRAWS = 100  # draws propagated through the emulator for its band
+
+
+#: Emulators trained in this process, by what training reads (see :func:`trained`).
+_EMULATORS: dict[str, Emulator] = {}
+
+
+def trained(a: Assembled, seed: int) -> Emulator:
+    """``train(a, ...)`` with this module's settings, once per process for equal inputs.
+
+    The experiments of one truth share the simulator runs (only the measurements, the
+    error model or the measuring wall differ), and the emulator is made from the runs
+    alone: every field :func:`train` reads or stores is in the key, so a cached emulator
+    is the one training would return (``test_the_emulator_cache_is_exact``).
+    """
+    fields = (a.theta, a.x, a.w, a.y_std, a.basis, a.outputs, a.inputs, a.lam_prior)
+    fields += (tuple(a.input_labels), tuple(a.parameter_names), a.theta_normaliser, seed)
+    key = hashlib.sha256(pickle.dumps(fields)).hexdigest()
+    if key not in _EMULATORS:
+        _EMULATORS[key] = train(a, n_burn=300, n_draws=100, n_chains=1, seed=seed)
+    return _EMULATORS[key]
 
 
 @dataclass(frozen=True)
@@ -131,7 +154,7 @@ def _band_coverage(
     return {w: v[0] for w, v in flux.items()}, {w: v[1] for w, v in flux.items()}
 
 
-def run_case(
+def case_data(
     seed: int,
     *,
     error_model: ErrorModel = "white",
@@ -140,15 +163,8 @@ def run_case(
     means: bool = False,
     described: bool = False,
     discrepancy: bool | str = False,
-    n_burn: int = 1000,
-    n_draws: int = 1000,
-) -> CaseResult:
-    """One known-truth calibration (see the module docstring).
-
-    ``described``: the calibrated model gives interval means as the logger records
-    them (``aggregate = "mean"``: :class:`IntervalMeans` with its default sub-steps),
-    the logger itself averaging over a finer clock (12 steps an interval).
-    """
+) -> tuple[dict[str, float], VirtualExperiment, Assembled, IntervalMeans | None]:
+    """The truth, virtual experiment, assembled data and calibrated model of one case."""
     rng = np.random.default_rng([seed, 15])
     truth = random_truth(rng)
     model = IntervalMeans(paper_wall(), ("heat_flux_in",)) if described else None
@@ -174,7 +190,32 @@ def run_case(
         scale="output",
         noise={"heat_flux_in": NoiseSpec(error_model, discrepancy=discrepancy)},
     )
-    em = train(a, n_burn=300, n_draws=100, n_chains=1, seed=seed)
+    return truth, ve, a, model
+
+
+def run_case(
+    seed: int,
+    *,
+    error_model: ErrorModel = "white",
+    noise_phi: float = 0.0,
+    true_wall: MultilayerWall | ConductivityWall | None = None,
+    means: bool = False,
+    described: bool = False,
+    discrepancy: bool | str = False,
+    n_burn: int = 1000,
+    n_draws: int = 1000,
+) -> CaseResult:
+    """One known-truth calibration (see the module docstring).
+
+    ``described``: the calibrated model gives interval means as the logger records
+    them (``aggregate = "mean"``: :class:`IntervalMeans` with its default sub-steps),
+    the logger itself averaging over a finer clock (12 steps an interval).
+    """
+    truth, ve, a, model = case_data(
+        seed, error_model=error_model, noise_phi=noise_phi, true_wall=true_wall,
+        means=means, described=described, discrepancy=discrepancy,
+    )  # fmt: skip
+    em = trained(a, seed)
     post = calibrate(
         em,
         a,

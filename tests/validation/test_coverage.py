@@ -56,10 +56,12 @@ import math
 import os
 from functools import cache
 
+import numpy as np
 import pytest
 from scipy import stats
 
-from coverage import CaseResult, run_case
+from bayescal.emulator.training import train
+from coverage import CaseResult, case_data, run_case, trained
 from nonlinear_wall import REALISTIC, ConductivityWall
 from virtual_wall import NOISE_VARIANCE, plastered_wall
 
@@ -99,6 +101,22 @@ def results(name: str) -> tuple[CaseResult, ...]:
                 row |= {"truth": c.truth}
                 f.write(json.dumps(row) + "\n")
     return cases
+
+
+def test_the_emulator_cache_is_exact() -> None:
+    # The experiments of one truth share their simulator runs, so run_case trains their
+    # emulator once per process (coverage.trained); the cached one is what training on
+    # another experiment's data returns, and other runs train anew.
+    _, _, white, _ = case_data(0, **EXPERIMENTS["white"])  # type: ignore[arg-type]
+    _, _, ar1, _ = case_data(0, **EXPERIMENTS["ar1"])  # type: ignore[arg-type]
+    cached = trained(white, 0)
+    assert trained(ar1, 0) is cached
+    fresh = train(ar1, n_burn=300, n_draws=100, n_chains=1, seed=0)
+    for name in ("beta", "tau", "hyper_draws"):
+        np.testing.assert_array_equal(getattr(fresh, name), getattr(cached, name))
+    assert fresh.lam == cached.lam
+    _, _, described, _ = case_data(0, **EXPERIMENTS["interval-means-described"])  # type: ignore[arg-type]
+    assert trained(described, 0) is not cached
 
 
 def binomial_floor(n: int) -> int:
