@@ -179,6 +179,9 @@ def test_reuse_with_sequential_loads_and_counts_the_screening_in_max_runs(
     assert study.design.run_cap(SCREENING_RUNS) == SCREENING_RUNS + 3 * 4
     alone = _load(tmp_path / "a", "reuse_screening = true\nsequential = true\nmax_runs = 20\n", 0)
     assert alone.design.runs == 0
+    # the screening's 12 runs count towards the first design's parameters + 2: one new run
+    # is enough for a one-shot design
+    assert _load(tmp_path / "b", "reuse_screening = true\n", 1).design.runs == 1
 
 
 @pytest.mark.parametrize(
@@ -190,8 +193,8 @@ def test_reuse_with_sequential_loads_and_counts_the_screening_in_max_runs(
         ("reuse_screening = true\nsequential = true\n", 0,
          r"design\.max_runs: 12 leaves no batch after the first design's 12 runs"),
         ("reuse_screening = true\n", 0,
-         r"design\.runs: 0 runs for 2 calibrated parameters; at least 4 are needed \(or 0 "
-         r"with sequential = true\)"),
+         r"design\.runs: 0 new runs after the screening's 12 for 2 calibrated parameters; at "
+         r"least 1 is needed \(or 0 with sequential = true\)"),
         ("sequential = true\n", 0, r"design\.runs: 0 runs for 2 calibrated parameters; at "
          r"least 4 are needed(?! \(or 0)"),
     ],

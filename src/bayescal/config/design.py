@@ -32,8 +32,8 @@ class DesignSection(Section):
     runs: int = field_doc(
         "Number of runs R of the Latin hypercube (at least parameters + 2); with "
         "sequential = true, the size of the first design. With reuse_screening, the new runs "
-        "after the screening's; with both, 0 makes the screening's runs alone the first "
-        "design.",
+        "after the screening's (at least 1, and the screening's runs count towards "
+        "parameters + 2); with both, 0 makes the screening's runs alone the first design.",
         30,
         default=30,
         ge=0,

@@ -681,12 +681,20 @@ def _design_problems(study: Study) -> list[str]:
     reused = study.screening.sobol_runs(len(study.parameters)) if reuse else 0
     alone = reuse and design.sequential and design.runs == 0  # the screening's runs alone
     problems = []
-    if not alone and design.runs < max(t + 2, 2):
-        with_zero = " (or 0 with sequential = true)" if reuse else ""
+    need = max(t + 2, 2)
+    if reuse and not alone and (design.runs < 1 or reused + design.runs < need):
+        # the screening's runs are design runs too: the first design counts them
+        fewest = max(need - reused, 1)
+        problems.append(
+            f"design.runs: {design.runs} new runs after the screening's {reused} for {t} "
+            f"calibrated parameters; at least {fewest} {'is' if fewest == 1 else 'are'} needed "
+            "(or 0 with sequential = true)"
+        )
+    elif not reuse and design.runs < need:
         problems.append(
             f"design.runs: {design.runs} runs for {t} "
             f"{'calibrated ' if study.candidates else ''}parameters; "
-            f"at least {max(t + 2, 2)} are needed{with_zero}"
+            f"at least {need} are needed"
         )
     if not design.sequential:
         return problems
