@@ -23,11 +23,12 @@ discrepancy (``[outputs.errors.<output>] discrepancy``) to see what it does to t
 intervals; the table is then ``box_truths_<mode>_<kind>.csv``. ``--layers`` runs the
 built-in box with ``window_model = "layers"`` and the Perez sky (the pair nearest
 EnergyPlus, tests/simulators/test_energyplus_box.py) instead of the paper's window;
-its table ends in ``_layers``. ``--sequential`` grows each truth's design in batches
-(``[design] sequential = true``, docs/method.md "Sequential design") from a first
-hypercube of ``--first`` runs, ``--batch`` runs a batch, up to ``--max-runs`` (by default
-10, 5 and 20: at most half the examples' 40 runs); the table gets the runs each truth
-used and why its design stopped, and ends in ``_sequential``.
+its table ends in ``_layers``. ``--seed`` draws other truths (and their data) than the
+default seed's; the table ends in ``_seed-<seed>``. ``--sequential`` grows each truth's
+design in batches (``[design] sequential = true``, docs/method.md "Sequential design")
+from a first hypercube of ``--first`` runs, ``--batch`` runs a batch, up to
+``--max-runs`` (by default 10, 5 and 20: half the paper's 40 runs); the table gets the
+runs each truth used and why its design stopped, and ends in ``_sequential``.
 
 Run (each truth is about one minute on the idle 2-core machine)::
 
@@ -151,11 +152,12 @@ def one_truth(
     simulator: dict[str, str] | None = None,
     sequential: tuple[int, int, int] | None = None,
     noise: str | None = None,
+    seed: int = SEED,
 ) -> dict[str, object]:
-    """Make the data at ``values``, run the example's study (its in-likelihood
-    discrepancy replaced by ``discrepancy``, one of :data:`DISCREPANCY`, if given;
-    its design sequential with ``sequential = (first, batch, max_runs)`` if given),
-    score its intervals and bands."""
+    """Make the data at ``values`` (noise and heater sequence seeded by ``seed +
+    index``), run the example's study (its in-likelihood discrepancy replaced by
+    ``discrepancy``, one of :data:`DISCREPANCY`, if given; its design sequential with
+    ``sequential = (first, batch, max_runs)`` if given), score its intervals and bands."""
     name = f"box-{mode}"
     shutil.rmtree(folder, ignore_errors=True)
     copy_example(name, folder)
@@ -168,7 +170,7 @@ def one_truth(
     if noise is not None:
         _edit_once(folder / "study.toml", r"^\[predict\]\n", f'[predict]\nnoise = "{noise}"\n',
                    "[predict] table")  # fmt: skip
-    table = box.make_phase(mode, np.random.default_rng(SEED + index), values)
+    table = box.make_phase(mode, np.random.default_rng(seed + index), values)
     table.to_parquet(folder / "data" / f"{name}.parquet", index=False, compression="zstd")
     start = time.perf_counter()
     said: list[str] = []
@@ -252,6 +254,13 @@ def main() -> None:
         default=None,
         help="[predict] noise of the studies (table: _noise-<value>; default: the example's)",
     )
+    parser.add_argument(
+        "--seed",
+        type=int,
+        default=SEED,
+        help=f"seed of the truths' hypercube and of each truth's data (table: _seed-<value>; "
+        f"default {SEED}): another seed draws other truths",
+    )
     args = parser.parse_args()
     args.out.mkdir(parents=True, exist_ok=True)
     suffix = (
@@ -259,10 +268,11 @@ def main() -> None:
         + ("_layers" if args.layers else "")
         + ("_sequential" if args.sequential else "")
         + (f"_noise-{args.noise}" if args.noise else "")
+        + (f"_seed-{args.seed}" if args.seed != SEED else "")
     )
     sequential = (args.first, args.batch, args.max_runs) if args.sequential else None
     csv = args.out / f"box_truths_{args.mode}{suffix}.csv"
-    drawn = truths(args.truths)
+    drawn = truths(args.truths, seed=args.seed)
     rows = [] if args.fresh else finished(csv, drawn)
     if rows:
         print(f"{len(rows)} truth(s) already in {csv} kept (--fresh redoes them)")
@@ -280,6 +290,7 @@ def main() -> None:
                 LAYERS if args.layers else None,
                 sequential,
                 args.noise,
+                args.seed,
             )
         )
         print(f"truth {i}: " + ", ".join(f"{k}={v}" for k, v in rows[-1].items()), flush=True)

@@ -673,29 +673,24 @@ def _reuse_problems(study: Study) -> list[str]:
 
 
 def _design_problems(study: Study) -> list[str]:
-    """``[design] runs`` and ``max_runs`` against the calibrated parameters (and, with
-    ``reuse_screening``, the screening's runs at the head of the design)."""
-    design = study.design
-    t = len(study.calibrated)
+    """``[design] runs`` and ``max_runs`` against the calibrated parameters (and the
+    screening's runs at the head of the design with ``reuse_screening``)."""
+    design, t = study.design, len(study.calibrated)
     reuse = design.reuse_screening and study.screening.method == "sobol"
     reused = study.screening.sobol_runs(len(study.parameters)) if reuse else 0
     alone = reuse and design.sequential and design.runs == 0  # the screening's runs alone
-    problems = []
-    need = max(t + 2, 2)
-    if reuse and not alone and (design.runs < 1 or reused + design.runs < need):
-        # the screening's runs are design runs too: the first design counts them
-        fewest = max(need - reused, 1)
+    problems, need = [], max(t + 2, 2)
+    fewest = max(need - reused, 1) if reuse else need  # the screening's runs count
+    if reuse and not alone and design.runs < fewest:
         problems.append(
             f"design.runs: {design.runs} new runs after the screening's {reused} for {t} "
             f"calibrated parameters; at least {fewest} {'is' if fewest == 1 else 'are'} needed "
             "(or 0 with sequential = true)"
         )
     elif not reuse and design.runs < need:
-        problems.append(
-            f"design.runs: {design.runs} runs for {t} "
-            f"{'calibrated ' if study.candidates else ''}parameters; "
-            f"at least {need} are needed"
-        )
+        calibrated = "calibrated " if study.candidates else ""
+        problems.append(f"design.runs: {design.runs} runs for {t} {calibrated}parameters; "
+                        f"at least {need} are needed")  # fmt: skip
     if not design.sequential:
         return problems
     cap = design.run_cap(reused)
