@@ -13,8 +13,8 @@ help:
 	@echo "make demo   - set up .venv and run the paper's wall example end to end"
 	@echo "make test   - set up .venv and run the fast suite: every module, in minutes (-m 'not slow')"
 	@echo "make test-slow - the full-size statistical and physics tests (-m slow, not tests/validation)"
-	@echo "make validate - known-truth coverage at full size (10 truths per experiment, ~25 min)"
-	@echo "               (CI runs test, test-slow and validate: together, every test)"
+	@echo "make validate - known-truth coverage at full size (10 truths per experiment)"
+	@echo "               (CI runs test, test-slow and validate at 4 truths: together, every test)"
 	@echo "make check  - ruff (lint + format check) and mypy"
 	@echo "make bench  - the quick benchmark set (ratios measured in one process)"
 
