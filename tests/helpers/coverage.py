@@ -16,6 +16,7 @@ from __future__ import annotations
 import hashlib
 import pickle
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -194,27 +195,17 @@ def case_data(
 
 
 def run_case(
-    seed: int,
-    *,
-    error_model: ErrorModel = "white",
-    noise_phi: float = 0.0,
-    true_wall: MultilayerWall | ConductivityWall | None = None,
-    means: bool = False,
-    described: bool = False,
-    discrepancy: bool | str = False,
-    n_burn: int = 1000,
-    n_draws: int = 1000,
+    seed: int, *, n_burn: int = 1000, n_draws: int = 1000, **experiment: Any
 ) -> CaseResult:
-    """One known-truth calibration (see the module docstring).
+    """One known-truth calibration (see the module docstring); ``experiment``: the
+    keywords of :func:`case_data`.
 
     ``described``: the calibrated model gives interval means as the logger records
     them (``aggregate = "mean"``: :class:`IntervalMeans` with its default sub-steps),
     the logger itself averaging over a finer clock (12 steps an interval).
     """
-    truth, ve, a, model = case_data(
-        seed, error_model=error_model, noise_phi=noise_phi, true_wall=true_wall,
-        means=means, described=described, discrepancy=discrepancy,
-    )  # fmt: skip
+    truth, ve, a, model = case_data(seed, **experiment)
+    true_wall = experiment.get("true_wall")
     em = trained(a, seed)
     post = calibrate(
         em,
