@@ -22,12 +22,13 @@ again with the same ``--truths`` keeps the truths it finished (``--fresh`` redoe
 table is then ``box_truths_<mode>_<kind>.csv``. ``--layers`` runs the built-in box with
 ``window_model = "layers"`` and the Perez sky (the pair nearest EnergyPlus,
 tests/simulators/test_energyplus_box.py) instead of the paper's window; its table ends
-in ``_layers``. ``--seed`` draws other truths (and their data, seeded by ``[seed, i]``)
-than the default seed's; the table ends in ``_seed-<seed>``. ``--sequential`` grows each
-truth's design in batches (``[design] sequential = true``, docs/method.md "Sequential
-design") from a first hypercube of ``--first`` runs, ``--batch`` runs a batch, up to
-``--max-runs`` (by default 10, 5 and 20: half the paper's 40 runs); the table gets the
-runs each truth used and why its design stopped, and ends in ``_sequential``.
+in ``_layers``. ``--seed`` draws other truths than the default seed's (their data seeded
+by ``seed + i``, so seeds less than ``--truths`` apart share noise streams at different
+truths); the table ends in ``_seed-<seed>``. ``--sequential`` grows each truth's design
+in batches (``[design] sequential = true``, docs/method.md "Sequential design") from a
+first hypercube of ``--first`` runs, ``--batch`` runs a batch, up to ``--max-runs`` (by
+default 10, 5 and 20: half the paper's 40 runs); the table gets the runs each truth used
+and why its design stopped, and ends in ``_sequential``.
 
 Run (each truth is about one minute on the idle 2-core machine)::
 
@@ -154,7 +155,7 @@ def one_truth(
     seed: int = SEED,
 ) -> dict[str, object]:
     """Make the data at ``values`` (noise and heater sequence or set-point wander seeded
-    by ``seed`` and ``index``), run the example's study (its in-likelihood discrepancy replaced by
+    by ``seed + index``), run the example's study (its in-likelihood discrepancy replaced by
     ``discrepancy``, one of :data:`DISCREPANCY`, if given; its design sequential with
     ``sequential = (first, batch, max_runs)`` if given), score its intervals and bands."""
     name = f"box-{mode}"
@@ -169,9 +170,7 @@ def one_truth(
     if noise is not None:
         _edit_once(folder / "study.toml", r"^\[predict\]\n", f'[predict]\nnoise = "{noise}"\n',
                    "[predict] table")  # fmt: skip
-    # the default seed's streams as logged; another seed's apart from every default truth's
-    rng = np.random.default_rng(seed + index if seed == SEED else [seed, index])
-    table = box.make_phase(mode, rng, values)
+    table = box.make_phase(mode, np.random.default_rng(seed + index), values)
     table.to_parquet(folder / "data" / f"{name}.parquet", index=False, compression="zstd")
     start = time.perf_counter()
     said: list[str] = []
