@@ -478,39 +478,73 @@ def calibrate(
         return _calibrate_nuts(
             target, x0, prior_map, assembled.parameter_names, n_burn, n_draws, seed, callback
         )
+    names = (*assembled.parameter_names, *target.aux_names)
+
+    def run_once(kept: int, folder: str | os.PathLike[str] | None, report: Callback) -> Posterior:
+        chains = sample(
+            target,
+            kept,
+            n_burn=n_burn,
+            n_chains=n_chains,
+            seed=seed,
+            backend=backend,
+            names=names,
+            callback=report,
+            checkpoint_dir=folder,
+            checkpoint_seconds=checkpoint_seconds,
+            starts=x0,
+            moves=moves,
+            held=hold,
+            held_at=hold_at,
+        )
+        return _built(chains, target, prior_map, assembled, seed, algebra, observations)
+
+    plan: dict[str, object] = {"n_burn": n_burn, "n_chains": n_chains, "seed": int(seed)}
+    return until_converged(
+        run_once,
+        n_draws,
+        max_draws,
+        plan | {"moves": moves},
+        checkpoint_dir=checkpoint_dir,
+        callback=callback,
+        on_extend=on_extend,
+    )
+
+
+Callback = Callable[[int], None] | None
+
+
+def until_converged(
+    run_once: Callable[[int, str | os.PathLike[str] | None, Callback], Posterior],
+    n_draws: int,
+    max_draws: int | None,
+    plan: dict[str, object],
+    *,
+    checkpoint_dir: str | os.PathLike[str] | None = None,
+    callback: Callback = None,
+    on_extend: Callable[[int, int], Callable[[int], None] | None] | None = None,
+) -> Posterior:
+    """Chains of ``n_draws`` kept draws, extended while a diagnostic fails (``max_draws``).
+
+    ``run_once(kept, checkpoint_dir, callback)`` runs the chains to ``kept`` kept
+    draws (resuming their snapshots in ``checkpoint_dir``) and judges them. While
+    the posterior's diagnostics fail and fewer than ``max_draws`` are kept, the
+    chains are extended by half their kept length at a time (``on_extend(kept,
+    longer)`` first; it may return a new progress callback). The length being
+    reached is written beside the snapshots with ``plan`` (what else fixes the
+    draws), so a killed run with the same plan goes straight to it
+    (:func:`calibrate`'s ``max_draws``).
+    """
     most = n_draws if max_draws is None else int(max_draws)
     if most < n_draws:
         raise ConfigError(f"max_draws must be >= n_draws = {n_draws}, got {most}")
     with ExitStack() as stack:
         if most > n_draws and checkpoint_dir is None:
             checkpoint_dir = stack.enter_context(TemporaryDirectory(prefix="bayescal-chains-"))
-        plan: dict[str, object] = {
-            "n_draws": n_draws,
-            "max_draws": most,
-            "n_burn": n_burn,
-            "n_chains": n_chains,
-            "seed": int(seed),
-            "moves": moves,
-        }
+        plan = plan | {"n_draws": n_draws, "max_draws": most}
         kept = _extended_length(checkpoint_dir, plan, n_draws, most) or n_draws
         while True:
-            chains = sample(
-                target,
-                kept,
-                n_burn=n_burn,
-                n_chains=n_chains,
-                seed=seed,
-                backend=backend,
-                names=(*assembled.parameter_names, *target.aux_names),
-                callback=callback,
-                checkpoint_dir=checkpoint_dir,
-                checkpoint_seconds=checkpoint_seconds,
-                starts=x0,
-                moves=moves,
-                held=hold,
-                held_at=hold_at,
-            )
-            post = _built(chains, target, prior_map, assembled, seed, algebra, observations)
+            post = run_once(kept, checkpoint_dir, callback)
             if post.diagnostics.ok or kept >= most:
                 return post
             longer = extended_length(kept, most)

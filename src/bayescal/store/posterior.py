@@ -71,6 +71,9 @@ LOG_DENSITY: Final = "lp"
 
 
 def _aux_description(name: str) -> str:
+    record, _, own = name.rpartition(":")
+    if record:  # a joint calibration's record (bayescal joint)
+        return f"{_aux_description(own)}, record {record}"
     if name == "lambda":
         return "precision lambda of the simulations outside the PCA basis (standardised units)"
     if name.startswith("lambda_star"):

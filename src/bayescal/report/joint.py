@@ -1,0 +1,80 @@
+"""The figure of ``bayescal joint``: each parameter's posterior from each record and jointly."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from pathlib import Path
+
+import matplotlib.pyplot as plt
+import numpy as np
+
+from bayescal.calibration.posterior import Posterior
+from bayescal.report.figures import _grid, label, save_figure
+
+__all__ = ["plot_joint"]
+
+BINS = 40
+
+
+def _column(post: Posterior, name: str) -> np.ndarray | None:
+    """The draws of ``name`` in ``post``, or None where it is not calibrated there."""
+    if name not in post.names:
+        return None
+    column = post.draws.reshape(-1, len(post.names))[:, post.names.index(name)]
+    return None if np.ptp(column) == 0.0 else column
+
+
+def plot_joint(path: str | Path, joint: Posterior, alone: Mapping[str, Posterior]) -> Path:
+    """One panel per parameter of ``joint``: the histogram of each study's own posterior
+    (outlines) and of the joint one (filled), with their 95 % intervals below.
+
+    Parameters
+    ----------
+    path
+        PNG file to write.
+    joint
+        The joint posterior.
+    alone
+        Study name -> its own posterior.
+    """
+    rows, cols = _grid(len(joint.names))
+    fig, axes = plt.subplots(rows, cols, figsize=(4.2 * cols, 3.2 * rows), squeeze=False)
+    colours = [f"C{k}" for k in range(10)]
+    for ax, name in zip(axes.flat, joint.names, strict=False):
+        sources = [(s, c) for s, p in alone.items() if (c := _column(p, name)) is not None]
+        together = _column(joint, name)
+        columns = [c for _, c in sources] + ([] if together is None else [together])
+        low = min(float(np.quantile(c, 0.001)) for c in columns)
+        high = max(float(np.quantile(c, 0.999)) for c in columns)
+        edges = np.linspace(low, high, BINS + 1) if high > low else BINS
+        for k, (source, column) in enumerate(sources):
+            colour = colours[k % len(colours)]
+            ax.hist(
+                column,
+                bins=edges,
+                density=True,
+                histtype="step",
+                lw=1.4,
+                color=colour,
+                label=source,
+            )
+        if together is not None:
+            ax.hist(together, bins=edges, density=True, color="0.25", alpha=0.35, label="joint")
+        bottom = ax.get_ylim()[1]
+        items = [*sources, *([] if together is None else [("joint", together)])]
+        for k, (source, column) in enumerate(items):
+            lo, hi = np.quantile(column, [0.025, 0.975])
+            colour = "0.25" if source == "joint" else colours[k % len(colours)]
+            y = -bottom * 0.06 * (k + 1)
+            ax.plot([lo, hi], [y, y], color=colour, lw=2.5, solid_capstyle="butt")
+        ax.set_ylim(-bottom * 0.06 * (len(items) + 1), bottom)
+        ax.set_yticks([])
+        ax.set_xlabel(
+            label(name) if not joint.priors[name].unit else f"{name} [{joint.priors[name].unit}]"
+        )
+    for ax in list(axes.flat)[len(joint.names) :]:
+        ax.set_visible(False)
+    axes.flat[0].legend(fontsize=8, frameon=False)
+    fig.suptitle("Each record alone and both together (bars: 95 % intervals)", fontsize=10)
+    fig.tight_layout()
+    return save_figure(fig, path)
