@@ -7,12 +7,12 @@ from pathlib import Path
 import click
 import pandas as pd
 
-from bayescal.cli.main import main, user_errors
+from bayescal.cli.main import user_errors
 
 __all__ = ["joint", "joint_text"]
 
 
-@main.command()
+@click.command()
 @click.argument("studies", nargs=-1, type=click.Path(path_type=Path))
 @click.option(
     "--out",

@@ -790,6 +790,3 @@ def compare(
     click.echo(
         comparison_text(result.table, result.notes, result.files, result.warnings, result.held_out)
     )
-
-
-from bayescal.cli import joint as _joint  # noqa: E402,F401  (registers `bayescal joint`)

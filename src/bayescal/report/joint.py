@@ -9,7 +9,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from bayescal.calibration.posterior import Posterior
-from bayescal.report.figures import _grid, label, save_figure
+from bayescal.report.figures import label, save_figure
 
 __all__ = ["plot_joint"]
 
@@ -37,7 +37,8 @@ def plot_joint(path: str | Path, joint: Posterior, alone: Mapping[str, Posterior
     alone
         Study name -> its own posterior.
     """
-    rows, cols = _grid(len(joint.names))
+    cols = min(len(joint.names), 3)
+    rows = -(-len(joint.names) // cols)
     fig, axes = plt.subplots(rows, cols, figsize=(4.2 * cols, 3.2 * rows), squeeze=False)
     colours = [f"C{k}" for k in range(10)]
     for ax, name in zip(axes.flat, joint.names, strict=False):
