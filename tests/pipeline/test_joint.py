@@ -130,6 +130,10 @@ def test_joint_equals_the_sequential_calibration(
             assert j.std() < 0.9 * _column(own, k).std(), name  # two records know more than one
     summary = pd.read_csv(out / "joint-summary.csv")
     assert sorted(set(summary["source"])) == ["a", "b", "joint"]
+    # the wall's derived quantities (its U-value ...) at the joint draws, beside each study's
+    u = summary[summary["parameter"] == "U_value"].set_index("source")
+    assert list(u.index) == ["a", "b", "joint"]
+    assert u.loc["joint", "sd"] < min(u.loc["a", "sd"], u.loc["b", "sd"])
     back = load_posterior(out / "posterior.nc")
     assert back.aux_names == ("a:lambda", "a:lambda_star", "b:lambda", "b:lambda_star")
     assert np.array_equal(back.unit_draws, post.unit_draws)

@@ -24,6 +24,7 @@ does for one record, and :func:`calibrate_joint` samples it to convergence.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import os
 from collections.abc import Callable, Mapping, Sequence
@@ -174,13 +175,12 @@ def joint_sampler(
             screen = True
         offset += rec.n_aux
     joint = tuple(block) if len(block) >= 2 else ()
-    return MetropolisWithinGibbs(
-        n_burn=n_burn,
+    # the records' own sampler settings (adaptation batches and cap) with the joint layout
+    return dataclasses.replace(
+        default_sampler(target.records[0].target, n_burn, moves),
         lower=lower,
         upper=upper,
         scales=scales,
-        batch_size=25,
-        max_adapt=0.25,
         joint=joint,
         joint_after_burn=len(joint) if moves == "joint" else 0,
         screen=screen and bool(joint),

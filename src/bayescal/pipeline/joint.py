@@ -29,13 +29,13 @@ import pandas as pd
 from bayescal.atomic import atomic_write_text
 from bayescal.calibration.bounds import bound_warnings
 from bayescal.calibration.joint import JointPosterior, Record, calibrate_joint
-from bayescal.calibration.posterior import Posterior
+from bayescal.calibration.posterior import Derived, Posterior
 from bayescal.calibration.target import Moves, build_target
 from bayescal.config import Study, load_study
 from bayescal.design import Prior
 from bayescal.errors import ConfigError
 from bayescal.pipeline.run import Results, load_results, writing
-from bayescal.pipeline.stages import Context, Options, prepare
+from bayescal.pipeline.stages import Context, Options, derived_at, prepare
 from bayescal.report.joint import plot_joint
 from bayescal.store import emulator as emulator_store
 from bayescal.store import posterior as posterior_store
@@ -161,9 +161,10 @@ def _record(res: Results) -> Record:
 
 def _rows(post: Posterior, source: str) -> list[dict[str, object]]:
     flat = post.draws.reshape(-1, len(post.names))
+    columns = [(name, post.priors[name].unit, flat[:, k]) for k, name in enumerate(post.names)]
+    columns += [(name, d.unit, d.draws.reshape(-1)) for name, d in post.derived.items()]
     rows = []
-    for k, name in enumerate(post.names):
-        column = flat[:, k]
+    for name, unit, column in columns:
         if np.ptp(column) == 0.0:  # held at one value: not calibrated there
             continue
         low, high = np.quantile(column, [0.025, 0.975])
@@ -171,7 +172,7 @@ def _rows(post: Posterior, source: str) -> list[dict[str, object]]:
             {
                 "parameter": name,
                 "source": source,
-                "unit": post.priors[name].unit,
+                "unit": unit,
                 "mean": float(column.mean()),
                 "sd": float(column.std(ddof=1)),
                 "lower": float(low),
@@ -300,6 +301,7 @@ def joint(
     finally:
         bar.close()
     seconds = time.perf_counter() - start
+    post = post.with_derived(_derived(contexts[0], post))
     rows = [row for (study, res) in found for row in _rows(_need(res.posterior), study.study.name)]
     summary = pd.DataFrame(rows + _rows(post, JOINT))
     warnings = [*_disagreements(summary), *bound_warnings(post.unit_draws, post.priors)]
@@ -312,6 +314,14 @@ def joint(
             plot_joint(out / FIGURE_FILE, post, alone),
         )
     return JointResult(post, summary, tuple(alone), files, tuple(warnings), seconds=seconds)
+
+
+def _derived(ctx: Context, post: Posterior) -> dict[str, Derived]:
+    """The first study's derived quantities (its simulator's, its ``[derived]``) at the
+    joint draws of the parameters it calibrates."""
+    names = tuple(n for n in post.names if n in ctx.priors and n not in ctx.held)
+    draws = post.draws[..., [post.names.index(n) for n in names]]
+    return derived_at(ctx, names, draws)
 
 
 class _Bar:

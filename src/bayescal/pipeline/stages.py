@@ -435,8 +435,12 @@ def _derived_values(
 
 def derived_draws(ctx: Context, posterior: Posterior) -> dict[str, Derived]:
     """The simulator's derived quantities and the study's ``[derived]`` at every draw."""
-    draws = posterior.draws
-    names = tuple(posterior.names)
+    return derived_at(ctx, tuple(posterior.names), posterior.draws)
+
+
+def derived_at(ctx: Context, names: tuple[str, ...], draws: np.ndarray) -> dict[str, Derived]:
+    """:func:`derived_draws` at draws ``(chains, draws, len(names))`` of ``names``
+    (physical units; the study's other parameters at their nominal values)."""
     found = _derived_values(ctx, names, draws.reshape(-1, len(names)))
     return {
         quantity: Derived(column.reshape(draws.shape[:2]), unit, text)

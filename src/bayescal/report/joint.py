@@ -17,16 +17,26 @@ BINS = 40
 
 
 def _column(post: Posterior, name: str) -> np.ndarray | None:
-    """The draws of ``name`` in ``post``, or None where it is not calibrated there."""
-    if name not in post.names:
+    """The draws of ``name`` (a parameter or a derived quantity) in ``post``, or None
+    where it is not calibrated there."""
+    if name in post.derived:
+        column = post.derived[name].draws.reshape(-1)
+    elif name in post.names:
+        column = post.draws.reshape(-1, len(post.names))[:, post.names.index(name)]
+    else:
         return None
-    column = post.draws.reshape(-1, len(post.names))[:, post.names.index(name)]
     return None if np.ptp(column) == 0.0 else column
 
 
+def _axis_label(post: Posterior, name: str) -> str:
+    unit = post.derived[name].unit if name in post.derived else post.priors[name].unit
+    return f"{name} [{unit}]" if unit else label(name)
+
+
 def plot_joint(path: str | Path, joint: Posterior, alone: Mapping[str, Posterior]) -> Path:
-    """One panel per parameter of ``joint``: the histogram of each study's own posterior
-    (outlines) and of the joint one (filled), with their 95 % intervals below.
+    """One panel per parameter and derived quantity of ``joint``: the histogram of each
+    study's own posterior (outlines) and of the joint one (filled), their 95 % intervals
+    below.
 
     Parameters
     ----------
@@ -37,11 +47,12 @@ def plot_joint(path: str | Path, joint: Posterior, alone: Mapping[str, Posterior
     alone
         Study name -> its own posterior.
     """
-    cols = min(len(joint.names), 3)
-    rows = -(-len(joint.names) // cols)
+    names = [*joint.names, *joint.derived]
+    cols = min(len(names), 3)
+    rows = -(-len(names) // cols)
     fig, axes = plt.subplots(rows, cols, figsize=(4.2 * cols, 3.2 * rows), squeeze=False)
     colours = [f"C{k}" for k in range(10)]
-    for ax, name in zip(axes.flat, joint.names, strict=False):
+    for ax, name in zip(axes.flat, names, strict=False):
         sources = [(s, c) for s, p in alone.items() if (c := _column(p, name)) is not None]
         together = _column(joint, name)
         columns = [c for _, c in sources] + ([] if together is None else [together])
@@ -70,10 +81,8 @@ def plot_joint(path: str | Path, joint: Posterior, alone: Mapping[str, Posterior
             ax.plot([lo, hi], [y, y], color=colour, lw=2.5, solid_capstyle="butt")
         ax.set_ylim(-bottom * 0.06 * (len(items) + 1), bottom)
         ax.set_yticks([])
-        ax.set_xlabel(
-            label(name) if not joint.priors[name].unit else f"{name} [{joint.priors[name].unit}]"
-        )
-    for ax in list(axes.flat)[len(joint.names) :]:
+        ax.set_xlabel(_axis_label(joint, name))
+    for ax in list(axes.flat)[len(names) :]:
         ax.set_visible(False)
     axes.flat[0].legend(fontsize=8, frameon=False)
     fig.suptitle("Each record alone and both together (bars: 95 % intervals)", fontsize=10)
