@@ -208,3 +208,22 @@ def test_failing_chains_grow_by_half_up_to_the_most() -> None:
     assert extended_length(3, 10) == 5  # ceil(4.5)
     assert extended_length(1, 10) == 2  # at least one draw more
     assert extended_length(100, 130, growth=2.0) == 130
+
+
+def test_each_statistic_is_one_arviz_call_over_every_parameter(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """R-hat, the ESS and the MCSE are computed once for all parameters (not once per
+    parameter: nine parameters made the diagnostics nine times slower)."""
+    import arviz as az
+
+    calls: list[str] = []
+    for name in ("rhat", "ess", "mcse"):
+        real = getattr(az, name)
+        monkeypatch.setattr(
+            az, name, lambda *a, _real=real, _name=name, **k: calls.append(_name) or _real(*a, **k)
+        )
+    draws = np.random.default_rng(3).standard_normal((4, 500, 9))
+    diag = diagnose(draws)
+    assert sorted(calls) == ["ess", "ess", "mcse", "mcse", "rhat"]
+    assert diag.ess_bulk.shape == (9,)

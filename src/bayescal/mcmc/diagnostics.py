@@ -197,7 +197,10 @@ def _arviz_values(
     # Degenerate parameters divide 0 by 0 inside ArviZ; they are detected below
     # and reported as warnings, so numpy's floating-point warnings are muted here.
     with np.errstate(divide="ignore", invalid="ignore"):
-        values = {key: np.array([float(f()[n]) for n in names]) for key, f in calls.items()}
+        values = {}
+        for key, f in calls.items():
+            result = f()  # every parameter at once: one ArviZ call per statistic
+            values[key] = np.array([float(result[n]) for n in names])
     half = draws.shape[1] // 2
     halves = np.concatenate([draws[:, :half], draws[:, half : 2 * half]], axis=0)
     frozen = np.all(np.ptp(halves, axis=1) == 0, axis=0)
