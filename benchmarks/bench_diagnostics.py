@@ -26,7 +26,7 @@ import time  # noqa: E402
 import arviz as az  # noqa: E402
 import numpy as np  # noqa: E402
 
-from bayescal.mcmc.diagnostics import _arviz_values, to_inference_data  # noqa: E402
+from bayescal.mcmc.diagnostics import STATISTICS, _arviz_values, to_inference_data  # noqa: E402
 
 #: (chains, kept draws, coordinates): the wall, the Twin House at its cap, the office.
 SIZES = ((4, 1000, 4), (4, 3200, 9), (4, 2400, 18))
@@ -35,14 +35,11 @@ SIZES = ((4, 1000, 4), (4, 3200, 9), (4, 2400, 18))
 def per_parameter(draws: np.ndarray, names: tuple[str, ...]) -> dict[str, np.ndarray]:
     """The former loop: every statistic computed for all parameters once per parameter."""
     idata = to_inference_data(draws, names)
-    calls = {
-        "rhat": lambda: az.rhat(idata, method="rank"),
-        "ess_bulk": lambda: az.ess(idata, method="bulk"),
-        "ess_tail": lambda: az.ess(idata, method="tail"),
-        "mcse_mean": lambda: az.mcse(idata, method="mean"),
-        "mcse_sd": lambda: az.mcse(idata, method="sd"),
-    }
-    return {key: np.array([float(f()[n]) for n in names]) for key, f in calls.items()}
+    out = {}
+    for key, (function, method) in STATISTICS.items():
+        call = getattr(az, function)
+        out[key] = np.array([float(call(idata, method=method)[n]) for n in names])
+    return out
 
 
 def main() -> None:

@@ -181,25 +181,28 @@ def to_inference_data(
     return az.from_dict(posterior=posterior)
 
 
+#: The statistics of :func:`diagnose`: key -> (ArviZ function, its ``method``).
+STATISTICS = {
+    "rhat": ("rhat", "rank"),
+    "ess_bulk": ("ess", "bulk"),
+    "ess_tail": ("ess", "tail"),
+    "mcse_mean": ("mcse", "mean"),
+    "mcse_sd": ("mcse", "sd"),
+}
+
+
 def _arviz_values(
     draws: NDArray[np.float64], names: tuple[str, ...]
 ) -> dict[str, NDArray[np.float64]]:
     """R-hat, ESS and MCSE per parameter (NaN for parameters that never move)."""
     az = import_arviz()
     idata = to_inference_data(draws, names)
-    calls = {
-        "rhat": lambda: az.rhat(idata, method="rank"),
-        "ess_bulk": lambda: az.ess(idata, method="bulk"),
-        "ess_tail": lambda: az.ess(idata, method="tail"),
-        "mcse_mean": lambda: az.mcse(idata, method="mean"),
-        "mcse_sd": lambda: az.mcse(idata, method="sd"),
-    }
     # Degenerate parameters divide 0 by 0 inside ArviZ; they are detected below
     # and reported as warnings, so numpy's floating-point warnings are muted here.
+    values = {}
     with np.errstate(divide="ignore", invalid="ignore"):
-        values = {}
-        for key, f in calls.items():
-            result = f()  # every parameter at once: one ArviZ call per statistic
+        for key, (function, method) in STATISTICS.items():
+            result = getattr(az, function)(idata, method=method)  # every parameter at once
             values[key] = np.array([float(result[n]) for n in names])
     half = draws.shape[1] // 2
     halves = np.concatenate([draws[:, :half], draws[:, half : 2 * half]], axis=0)
