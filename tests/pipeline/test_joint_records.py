@@ -183,6 +183,7 @@ def test_studies_that_cannot_be_calibrated_together_are_one_line(
         return err.value.one_line()
 
     assert "needs two studies or more, got 1" in refused(studies["a"])
+    assert "nowhere: file not found" in refused(studies["a"], tmp_path / "nowhere")
     assert "prior_from" in refused(studies["a"], studies["bseq"])
     twin = tmp_path / "twin" / "a"
     shutil.copytree(studies["a"], twin)

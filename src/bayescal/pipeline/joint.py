@@ -277,7 +277,8 @@ def joint(
     for rec in records:
         if rec.held:
             say(f"note: {rec.label} holds {', '.join(rec.held)} at its values (not calibrated)")
-    out.mkdir(parents=True, exist_ok=True)
+    with writing(out):
+        out.mkdir(parents=True, exist_ok=True)
     chains_dir = out / f"chains-{_key(found, chosen)}"
     bar = _Bar(opts, chosen.chains, chosen.burn)
     start = time.perf_counter()
