@@ -138,6 +138,9 @@ def test_joint_equals_the_sequential_calibration(
     assert back.aux_names == ("a:lambda", "a:lambda_star", "b:lambda", "b:lambda_star")
     assert np.array_equal(back.unit_draws, post.unit_draws)
     assert (out / "joint.png").stat().st_size > 10_000
+    page = (out / "joint.md").read_text(encoding="utf-8")
+    assert "| quantity | unit | a | b | joint |" in page
+    assert "WARNING" not in page  # the records agree
 
 
 def test_cli_joint_resumes_the_finished_chains_and_prints_the_table(

@@ -20,7 +20,7 @@ __all__ = ["joint", "joint_text"]
     type=click.Path(path_type=Path),
     default=Path("joint"),
     show_default=True,
-    help="Folder for posterior.nc, joint-summary.csv and joint.png (and the chains' "
+    help="Folder for posterior.nc, joint-summary.csv, joint.png and joint.md (and the chains' "
     "snapshots, from which a killed run resumes).",
 )
 @click.option(
@@ -64,7 +64,8 @@ def joint(
     intervals hold the parameters' uncertainty given every record's error
     model; they do not hold a model error the studies do not model.
 
-    Writes posterior.nc, joint-summary.csv and joint.png into --out.
+    Writes posterior.nc, joint-summary.csv, joint.png and joint.md (the table with
+    its warnings first, and the figure) into --out.
     """
     from bayescal.cli.progress import progress_options
     from bayescal.pipeline import Options
@@ -86,18 +87,15 @@ def joint(
 
 def joint_text(summary: pd.DataFrame, labels: tuple[str, ...]) -> str:
     """The table of ``bayescal joint``: a row per parameter, a column per source."""
+    from bayescal.report.joint import interval_cell  # matplotlib: not at start-up
+
     sources = [*labels, "joint"]
     header = ["parameter", "unit", *sources]
     rows = [header]
     for name, group in summary.groupby("parameter", sort=False):
         by = group.set_index("source")
         cells = [str(name), str(group["unit"].iloc[0])]
-        for source in sources:
-            if source in by.index:
-                r = by.loc[source]
-                cells.append(f"{r['mean']:.4g} [{r['lower']:.4g}, {r['upper']:.4g}]")
-            else:
-                cells.append("-")
+        cells += [interval_cell(by, s) if s in by.index else "-" for s in sources]
         rows.append(cells)
     widths = [max(len(row[k]) for row in rows) for k in range(len(header))]
     lines = [

@@ -9,7 +9,8 @@ prior_from``: its data would count twice).
 
 The result is the joint posterior beside each study's own: ``posterior.nc``,
 ``joint-summary.csv`` (every parameter, each study alone and jointly),
-``joint.png`` (their marginal densities) in ``--out``. Warnings say what a
+``joint.png`` (their marginal densities) and ``joint.md`` (the table, its warnings
+first) in ``--out``. Warnings say what a
 joint posterior hides: a parameter whose joint posterior lies outside what one
 record alone allows (the records disagree: a model error in one of them at
 least), one leaning on a prior bound, a failed diagnostic.
@@ -36,7 +37,7 @@ from bayescal.design import Prior
 from bayescal.errors import ConfigError
 from bayescal.pipeline.run import Results, load_results, writing
 from bayescal.pipeline.stages import Context, Options, derived_at, prepare
-from bayescal.report.joint import plot_joint
+from bayescal.report.joint import joint_markdown, plot_joint
 from bayescal.store import emulator as emulator_store
 from bayescal.store import posterior as posterior_store
 
@@ -44,6 +45,7 @@ __all__ = ["JointResult", "joint", "joint_priors"]
 
 SUMMARY_FILE = "joint-summary.csv"
 FIGURE_FILE = "joint.png"
+MARKDOWN_FILE = "joint.md"
 JOINT = "joint"
 
 
@@ -313,6 +315,9 @@ def joint(
             posterior_store.save_posterior(post, out / posterior_store.FILE),
             atomic_write_text(out / SUMMARY_FILE, summary.to_csv(index=False)),
             plot_joint(out / FIGURE_FILE, post, alone),
+            atomic_write_text(
+                out / MARKDOWN_FILE, joint_markdown(summary, list(alone), warnings, FIGURE_FILE)
+            ),
         )
     return JointResult(post, summary, tuple(alone), files, tuple(warnings), seconds=seconds)
 

@@ -2,16 +2,17 @@
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 import matplotlib.pyplot as plt
 import numpy as np
+import pandas as pd
 
 from bayescal.calibration.posterior import Posterior
 from bayescal.report.figures import label, save_figure
 
-__all__ = ["plot_joint"]
+__all__ = ["interval_cell", "joint_markdown", "plot_joint"]
 
 BINS = 40
 
@@ -88,3 +89,34 @@ def plot_joint(path: str | Path, joint: Posterior, alone: Mapping[str, Posterior
     fig.suptitle("Each record alone and both together (bars: 95 % intervals)", fontsize=10)
     fig.tight_layout()
     return save_figure(fig, path)
+
+
+def interval_cell(by: pd.DataFrame, source: str) -> str:
+    """``mean [lower, upper]`` of ``source``'s row in ``by`` (a summary indexed by source)."""
+    mean, low, high = by.loc[source, ["mean", "lower", "upper"]].to_numpy(dtype=float)
+    return f"{mean:.4g} [{low:.4g}, {high:.4g}]"
+
+
+def joint_markdown(
+    summary: pd.DataFrame, labels: Sequence[str], warnings: Sequence[str], figure: str
+) -> str:
+    """``joint.md``: the warnings first, then each parameter's mean and 95 % interval
+    from each study alone and jointly, then the figure."""
+    sources = [*labels, "joint"]
+    lines = ["# Joint calibration", ""]
+    lines += [f"**WARNING:** {w}" for w in warnings]
+    if warnings:
+        lines.append("")
+    lines += [
+        "Means [95 % intervals]: each study alone, then all records together.",
+        "",
+        "| quantity | unit | " + " | ".join(sources) + " |",
+        "|---|---|" + "---|" * len(sources),
+    ]
+    for name, group in summary.groupby("parameter", sort=False):
+        by = group.set_index("source")
+        cells = [interval_cell(by, s) if s in by.index else "–" for s in sources]
+        unit = str(group["unit"].iloc[0])
+        lines.append(f"| {name!s} | {unit} | " + " | ".join(cells) + " |")
+    lines += ["", f"![each record alone and together]({figure})", ""]
+    return "\n".join(lines)
