@@ -11,6 +11,7 @@ Monte Carlo error.
 
 from __future__ import annotations
 
+import dataclasses
 import shutil
 from pathlib import Path
 
@@ -20,8 +21,11 @@ import pytest
 from click.testing import CliRunner
 
 from bayescal.calibration.joint import JointPosterior, Record
+from bayescal.calibration.priors import ThetaPriors
+from bayescal.calibration.target import build_target
 from bayescal.cli import main
 from bayescal.config import load_study
+from bayescal.design import BetaPrior
 from bayescal.errors import ConfigError
 from bayescal.pipeline import Options, load_results, run
 from bayescal.pipeline.joint import _disagreements, _record, joint
@@ -81,6 +85,12 @@ def _column(post: object, k: int) -> np.ndarray:
     return draws.reshape(-1, draws.shape[-1])[:, k]
 
 
+def _target_parts(folder: Path) -> tuple[object, ...]:
+    em = load_results(load_study(folder)).emulator
+    assert em is not None
+    return em.emulator, em.assembled.w_star, em.assembled.lam_star_prior
+
+
 def test_the_joint_density_is_the_product_of_the_records(studies: dict[str, Path]) -> None:
     a = _record(load_results(load_study(studies["a"])))
     b = _record(load_results(load_study(studies["b"])))
@@ -97,6 +107,17 @@ def test_the_joint_density_is_the_product_of_the_records(studies: dict[str, Path
         v = np.concatenate([u, ea, eb])
         expected = a.target(np.concatenate([u, ea])) + b.target(np.concatenate([u, eb]))
         assert target(v) == pytest.approx(expected, rel=1e-12, abs=1e-9)
+    # the prior of a shared parameter counts once: records built with Beta priors
+    beta = {n: BetaPrior(p.lower, p.upper, 2.0, 3.0, unit=p.unit) for n, p in priors.items()}
+    a_beta, b_beta = (
+        dataclasses.replace(r, target=build_target(*_target_parts(studies[k]), list(beta.values())))
+        for r, k in ((a, "a"), (b, "b"))
+    )
+    weighted = JointPosterior([a_beta, b_beta], beta)
+    counted_twice = a_beta.target(np.concatenate([u, ea])) + b_beta.target(np.concatenate([u, eb]))
+    once = ThetaPriors(tuple(beta.values())).scalar(u)
+    assert once != 0.0
+    assert weighted(v) == pytest.approx(counted_twice - once, rel=1e-12)
     # outside a bound: zero density
     assert target(np.concatenate([[1.2, 0.5], ea, eb])) == -np.inf
     # a record that does not calibrate cp_cb holds it at its value there
@@ -180,9 +201,9 @@ def test_records_that_disagree_are_a_warning() -> None:
 def test_studies_that_cannot_be_calibrated_together_are_one_line(
     studies: dict[str, Path], tmp_path: Path
 ) -> None:
-    def refused(*paths: Path) -> str:
+    def refused(*paths: Path, out: Path | None = None) -> str:
         with pytest.raises(ConfigError) as err:
-            joint(list(paths), tmp_path / "out")
+            joint(list(paths), out or tmp_path / "out")
         return err.value.one_line()
 
     assert "needs two studies or more, got 1" in refused(studies["a"])
@@ -203,6 +224,15 @@ def test_studies_that_cannot_be_calibrated_together_are_one_line(
     line = refused(studies["a"], wider)
     assert "k_cb has the prior" in line
     assert "give k_cb the same prior in every study" in line
+    stale = tmp_path / "stale"
+    shutil.copytree(studies["b"], stale)
+    _edit(stale, ("pca_components = 2", "pca_components = 3"))
+    line = refused(studies["a"], stale)
+    assert "the study changed since its emulator stage ran (emulator.pca_components" in line
+    assert "run `bayescal run" in line
+    assert "is the output folder of" in refused(
+        studies["a"], studies["b"], out=studies["b"] / "out"
+    )
     fresh = write_study(tmp_path / "fresh")
     assert "fresh/out has no finished calibration" in refused(studies["a"], fresh)
     assert not (tmp_path / "out" / "posterior.nc").exists()

@@ -55,7 +55,11 @@ def joint(
 
     The chains run as the studies' [calibration] sections say (the largest
     chains, burn-in and draws among them, joint moves if any study has them)
-    and are extended while a diagnostic fails.
+    and are extended while a diagnostic fails. Each study must be up to date
+    with its file (its emulator and calibrate stages finished with the
+    file's present settings). A study's difference-process phase
+    ([discrepancy] enabled) is not part of the joint calibration. The derived
+    quantities (U, R, [derived]) are the first study's, at the joint draws.
 
     Prints each parameter's mean and 95 % interval from each study alone and
     jointly, and WARNING lines first where the joint posterior lies outside

@@ -35,11 +35,13 @@ from bayescal.calibration.target import Moves, build_target
 from bayescal.config import Study, load_study
 from bayescal.design import Prior
 from bayescal.errors import ConfigError
+from bayescal.pipeline.keys import keys_and_inputs
 from bayescal.pipeline.run import Results, load_results, writing
 from bayescal.pipeline.stages import Context, Options, derived_at, prepare
 from bayescal.report.joint import joint_markdown, plot_joint
 from bayescal.store import emulator as emulator_store
 from bayescal.store import posterior as posterior_store
+from bayescal.store.stages import StageLog
 
 __all__ = ["JointResult", "joint", "joint_priors"]
 
@@ -92,14 +94,25 @@ def _prepared(path: Path) -> Context:
 
 
 def _finished(ctx: Context) -> Results:
+    """The study's results, its emulator and calibration up to date with its file."""
     res = load_results(ctx.study)
+    path = ctx.study.path
     if res.emulator is None or res.posterior is None:
-        path = ctx.study.path
         raise ConfigError(
             f"{path}: the study has no finished calibration (a joint calibration uses each "
             "study's emulator and compares with its own posterior)",
             hint=f"run `bayescal run {path}` first",
         )
+    log = StageLog.open(ctx.out)
+    keys, inputs = keys_and_inputs(ctx)
+    for stage in ("emulator", "calibrate"):
+        if not log.done(stage, keys[stage]):
+            changed = log.changed_inputs(stage, keys[stage], inputs[stage]) or ["an input"]
+            raise ConfigError(
+                f"{path}: the study changed since its {stage} stage ran ({', '.join(changed)} "
+                "changed), so its emulator and posterior are not those of the study file",
+                hint=f"run `bayescal run {path}` to bring it up to date",
+            )
     return res
 
 
@@ -109,7 +122,7 @@ def _same_prior(name: str, first: tuple[str, Prior], other: tuple[str, Prior]) -
         raise ConfigError(
             f"{name} has the prior {pa.spec()} [{pa.unit}] in {a} but {pb.spec()} [{pb.unit}] "
             f"in {b}: a shared parameter's prior counts once, so it must be the same",
-            hint=f"give {name} the same prior in every study",
+            hint=f"give {name} the same prior in every study, then `bayescal run` the one changed",
         )
 
 
@@ -158,7 +171,8 @@ def _record(res: Results) -> Record:
         algebra=ctx.study.emulator.algebra,
         observations=em.assembled.observations,
     )
-    return Record(ctx.study.study.name, target, tuple(ctx.priors), held)
+    # a record's name labels its error parameters in posterior.nc, where '/' is refused
+    return Record(ctx.study.study.name.replace("/", "-"), target, tuple(ctx.priors), held)
 
 
 def _rows(post: Posterior, source: str) -> list[dict[str, object]]:
@@ -267,6 +281,13 @@ def joint(
         )
     contexts = [_prepared(Path(p)) for p in paths]
     priors = joint_priors(contexts)
+    for ctx in contexts:
+        if out.resolve() == ctx.out.resolve():
+            raise ConfigError(
+                f"--out {out} is the output folder of {ctx.study.path}: the joint posterior "
+                "would replace that study's own",
+                hint="give the joint calibration a folder of its own",
+            )
     found = [(ctx.study, _finished(ctx)) for ctx in contexts]
     records = [_record(res) for _, res in found]
     target = JointPosterior(records, priors)
@@ -276,7 +297,15 @@ def joint(
         f"({', '.join(target.names)}), {target.d - target.t} error parameters; "
         f"{chosen.chains} chains x ({chosen.burn} + {chosen.samples}), moves {chosen.moves!r}"
     )
-    for rec in records:
+    for ctx, rec in zip(contexts, records, strict=True):
+        if ctx.study.discrepancy.enabled:
+            say(
+                f"note: {rec.label}'s difference-process phase ([discrepancy] enabled) is not "
+                "part of the joint calibration: its calibrate stage's likelihood is"
+            )
+        others = {n for r in records if r is not rec for n in r.calibrated}
+        if not others & set(rec.calibrated):
+            say(f"note: {rec.label} shares no parameter with the others: its posterior is its own")
         if rec.held:
             say(f"note: {rec.label} holds {', '.join(rec.held)} at its values (not calibrated)")
     with writing(out):
@@ -285,31 +314,32 @@ def joint(
     bar = _Bar(opts, chosen.chains, chosen.burn)
     start = time.perf_counter()
     try:
-        post = calibrate_joint(
-            target,
-            n_chains=chosen.chains,
-            n_burn=chosen.burn,
-            n_draws=chosen.samples,
-            max_draws=chosen.most,
-            seed=chosen.seed,
-            moves=chosen.moves,
-            backend="serial" if opts.chains_backend == "serial" else "processes",
-            callback=bar.open("joint calibration", chosen.samples),
-            checkpoint_dir=chains_dir,
-            checkpoint_seconds=opts.checkpoint_seconds,
-            on_extend=lambda _, longer: bar.open(
-                f"joint calibration, extended to {longer}", longer
-            ),
-        )
+        with writing(out):  # the chains' snapshots too
+            post = calibrate_joint(
+                target,
+                n_chains=chosen.chains,
+                n_burn=chosen.burn,
+                n_draws=chosen.samples,
+                max_draws=chosen.most,
+                seed=chosen.seed,
+                moves=chosen.moves,
+                backend="serial" if opts.chains_backend == "serial" else "processes",
+                callback=bar.open("joint calibration", chosen.samples),
+                checkpoint_dir=chains_dir,
+                checkpoint_seconds=opts.checkpoint_seconds,
+                on_extend=lambda _, longer: bar.open(
+                    f"joint calibration, extended to {longer} draws", longer
+                ),
+            )
     finally:
         bar.close()
     seconds = time.perf_counter() - start
     post = post.with_derived(_derived(contexts[0], post))
-    rows = [row for (study, res) in found for row in _rows(_need(res.posterior), study.study.name)]
+    alone = {rec.label: _need(res.posterior) for rec, (_, res) in zip(records, found, strict=True)}
+    rows = [row for label, own in alone.items() for row in _rows(own, label)]
     summary = pd.DataFrame(rows + _rows(post, JOINT))
     warnings = [*_disagreements(summary), *bound_warnings(post.unit_draws, post.priors)]
     warnings += list(post.warnings)
-    alone = {study.study.name: _need(res.posterior) for study, res in found}
     with writing(out):
         files = (
             posterior_store.save_posterior(post, out / posterior_store.FILE),
@@ -324,10 +354,12 @@ def joint(
 
 def _derived(ctx: Context, post: Posterior) -> dict[str, Derived]:
     """The first study's derived quantities (its simulator's, its ``[derived]``) at the
-    joint draws of the parameters it calibrates."""
+    joint draws of the parameters it calibrates, its held inputs at their values."""
     names = tuple(n for n in post.names if n in ctx.priors and n not in ctx.held)
     draws = post.draws[..., [post.names.index(n) for n in names]]
-    return derived_at(ctx, names, draws)
+    held = tuple(ctx.held)  # the study's held inputs at their values, as its own posterior has them
+    fixed = np.broadcast_to([ctx.held[n] for n in held], (*draws.shape[:2], len(held)))
+    return derived_at(ctx, names + held, np.concatenate([draws, fixed], axis=-1))
 
 
 class _Bar:

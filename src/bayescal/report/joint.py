@@ -57,6 +57,9 @@ def plot_joint(path: str | Path, joint: Posterior, alone: Mapping[str, Posterior
         sources = [(s, c) for s, p in alone.items() if (c := _column(p, name)) is not None]
         together = _column(joint, name)
         columns = [c for _, c in sources] + ([] if together is None else [together])
+        if not columns:  # constant everywhere: nothing to draw
+            ax.set_visible(False)
+            continue
         low = min(float(np.quantile(c, 0.001)) for c in columns)
         high = max(float(np.quantile(c, 0.999)) for c in columns)
         edges = np.linspace(low, high, BINS + 1) if high > low else BINS
