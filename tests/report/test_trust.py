@@ -115,3 +115,41 @@ def test_trust_warnings_gather_bounds_of_both_phases_and_the_catalogue() -> None
     assert [w.split(":")[0] for w in found] == ["calibration", "difference process", "flux"]
     assert "k leans on the upper bound of its prior (0.3 W/(m·K))" in found[0]
     assert trust_warnings(None, None, _table(_pair("flux", "test", 1.0, 0.5))) == ()
+
+
+def _posterior_with_prior_from(centre: tuple[float, float]) -> Posterior:
+    """A posterior whose draws sit at ``centre`` (normalised) under a prior fitted to
+    draws around 0.5: its shared parameters' prior is that logit-normal."""
+    from bayescal.design import PosteriorPrior, fit_logit_normal
+
+    rng = np.random.default_rng(2)
+    names = ("k", "c")
+    previous = 0.5 + 0.02 * rng.standard_normal((4000, 2))
+    joint = fit_logit_normal(names, previous, source="../first")
+    priors = {
+        n: PosteriorPrior(0.0, 1.0, joint=joint, index=i, unit="1") for i, n in enumerate(names)
+    }
+    draws = np.asarray(centre) + 0.01 * rng.standard_normal((4, 500, 2))
+    aux = np.ones((4, 500, 2)) + 0.01 * rng.standard_normal((4, 500, 2))
+    return Posterior.build(
+        names,
+        priors,
+        draws,
+        acceptance=np.full((4, 4), 0.3),
+        aux=aux,
+        aux_names=("lambda", "lambda_star"),
+    )
+
+
+def test_a_posterior_in_the_thin_tail_of_a_prior_from_draws_is_a_warning() -> None:
+    """The records disagree where the new centre lies farther out than 95 % of the prior."""
+    from bayescal.report.trust import prior_conflicts
+
+    assert prior_conflicts(_posterior_with_prior_from((0.51, 0.49))) == ()
+    far = prior_conflicts(_posterior_with_prior_from((0.56, 0.5)))  # 3 prior SD out
+    assert len(far) == 1
+    assert far[0].startswith("the posterior of k, c lies where the prior from ../first is thin")
+    assert "`bayescal joint`" in far[0]
+    assert any(
+        "../first is thin" in w for w in trust_warnings(_posterior_with_prior_from((0.56, 0.5)))
+    )

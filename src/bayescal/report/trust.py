@@ -30,6 +30,7 @@ import pandas as pd
 from bayescal.calibration.bounds import bound_warnings
 from bayescal.calibration.modelerror import ModelErrorSize
 from bayescal.calibration.posterior import Posterior
+from bayescal.design import PosteriorPrior
 
 __all__ = [
     "ABSORBS",
@@ -168,6 +169,48 @@ def held_out_outputs(attrs: dict[str, object]) -> tuple[str, ...]:
     return tuple(o for o in str(attrs.get("held_out", "")).split(",") if o)
 
 
+#: Share of a prior from a previous posterior beyond the new posterior's centre below which
+#: the two records count as disagreeing (:func:`prior_conflicts`).
+CONFLICT = 0.05
+
+
+def prior_conflicts(posterior: Posterior, phase: str = "") -> tuple[str, ...]:
+    """Where the posterior's centre lies in the thin tail of a prior from a previous
+    posterior (``[study] prior_from``): one sentence per such prior.
+
+    The centre is the mean of the draws' ``logit(u)``; its squared Mahalanobis
+    distance from the prior's logit-normal mean, under its covariance, is read
+    against chi-square with as many degrees of freedom as the prior has
+    parameters: below :data:`CONFLICT` of the prior's mass lies farther out.
+    The new record then pulls the parameters where the previous one did not put
+    them, and the product rests on the fitted density's tail, where it is least
+    like the previous draws (``docs/case-studies.md``, Twin House).
+    """
+    from scipy import special, stats
+
+    joints = {}
+    for prior in posterior.priors.values():
+        if isinstance(prior, PosteriorPrior):
+            joints[prior.joint] = prior.joint
+    found = []
+    for joint in joints:
+        columns = [posterior.names.index(n) for n in joint.names]
+        u = posterior.unit_draws.reshape(-1, len(posterior.names))[:, columns]
+        z = special.logit(np.clip(u, 1e-12, 1.0 - 1e-12)).mean(axis=0) - np.asarray(joint.mean)
+        d2 = float(z @ np.linalg.solve(np.asarray(joint.cov, dtype=float), z))
+        share = float(stats.chi2.sf(d2, len(joint.names)))
+        if share < CONFLICT:
+            found.append(
+                f"{phase}the posterior of {', '.join(joint.names)} lies where the prior from "
+                f"{joint.source or 'the previous posterior'} is thin ({100 * share:.2g} % of "
+                "that prior lies farther from its centre): this record and the previous one "
+                "disagree, and a sequential calibration then rests on the tail of the density "
+                "fitted to the previous draws; `bayescal joint` calibrates both records "
+                "without it"
+            )
+    return tuple(found)
+
+
 def trust_warnings(
     posterior: Posterior | None,
     discrepancy: Posterior | None = None,
@@ -198,6 +241,7 @@ def trust_warnings(
     for phase, post in (("calibration: ", posterior), ("difference process: ", discrepancy)):
         if post is not None:
             found += bound_warnings(post.unit_draws, post.priors, phase=phase)
+            found += prior_conflicts(post, phase=phase)
     if metrics is not None:
         for verdict in catalogue_verdicts(metrics, held_out):
             if (text := verdict.warning()) is not None:
