@@ -28,7 +28,7 @@ import numpy as np  # noqa: E402
 
 from bayescal.mcmc.diagnostics import STATISTICS, _arviz_values, to_inference_data  # noqa: E402
 
-#: (chains, kept draws, coordinates): the wall, the Twin House at its cap, the office.
+#: (chains, kept draws, coordinates); the second is the Twin House at its cap.
 SIZES = ((4, 1000, 4), (4, 3200, 9), (4, 2400, 18))
 
 

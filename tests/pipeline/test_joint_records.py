@@ -242,3 +242,17 @@ def test_studies_that_cannot_be_calibrated_together_are_one_line(
     assert cli.exit_code == 2
     assert cli.output.count("\n") == 1
     assert cli.output.startswith("error: ")
+
+
+def test_joint_md_puts_the_warnings_first_and_the_notes_before_the_figure() -> None:
+    from bayescal.report.joint import joint_markdown
+
+    rows = [("k", "a", "1", 1.0, 0.9, 1.1), ("k", "joint", "1", 1.0, 0.95, 1.05)]
+    summary = pd.DataFrame(rows, columns=["parameter", "source", "unit", "mean", "lower", "upper"])
+    page = joint_markdown(summary, ["a"], ["they disagree"], "joint.png", ["b holds c"])
+    lines = page.splitlines()
+    assert lines[2] == "**WARNING:** they disagree"
+    assert "| k | 1 | 1 [0.9, 1.1] | 1 [0.95, 1.05] |" in lines
+    assert lines.index("Note: b holds c") < lines.index(
+        "![each record alone and together](joint.png)"
+    )

@@ -43,7 +43,7 @@ from bayescal.store import emulator as emulator_store
 from bayescal.store import posterior as posterior_store
 from bayescal.store.stages import StageLog
 
-__all__ = ["JointResult", "joint", "joint_priors"]
+__all__ = ["JointResult", "joint", "joint_priors", "label_of"]
 
 SUMMARY_FILE = "joint-summary.csv"
 FIGURE_FILE = "joint.png"
@@ -68,6 +68,8 @@ class JointResult:
         What was written into the output folder.
     warnings
         What the user must read first.
+    notes
+        What the joint calibration leaves out or holds (also in ``joint.md``).
     seconds
         Wall time of the chains. [s]
     """
@@ -130,7 +132,7 @@ def joint_priors(contexts: Sequence[Context]) -> dict[str, Prior]:
     """The joint posterior's parameters and priors: every study's calibrated ones, in
     order of first appearance; raises where the studies cannot be calibrated together
     (a name twice, no shared parameter, a shared one with different priors)."""
-    labels = [ctx.study.study.name for ctx in contexts]
+    labels = [label_of(ctx) for ctx in contexts]
     twice = sorted({x for x in labels if labels.count(x) > 1})
     if twice:
         raise ConfigError(
@@ -171,8 +173,13 @@ def _record(res: Results) -> Record:
         algebra=ctx.study.emulator.algebra,
         observations=em.assembled.observations,
     )
-    # a record's name labels its error parameters in posterior.nc, where '/' is refused
-    return Record(ctx.study.study.name.replace("/", "-"), target, tuple(ctx.priors), held)
+    return Record(label_of(ctx), target, tuple(ctx.priors), held)
+
+
+def label_of(ctx: Context) -> str:
+    """A study's label in the joint posterior: its name (its error parameters' prefix in
+    posterior.nc, where '/' is refused)."""
+    return ctx.study.study.name.replace("/", "-")
 
 
 def _rows(post: Posterior, source: str) -> list[dict[str, object]]:
@@ -297,17 +304,22 @@ def joint(
         f"({', '.join(target.names)}), {target.d - target.t} error parameters; "
         f"{chosen.chains} chains x ({chosen.burn} + {chosen.samples}), moves {chosen.moves!r}"
     )
+    notes: list[str] = []
     for ctx, rec in zip(contexts, records, strict=True):
         if ctx.study.discrepancy.enabled:
-            say(
-                f"note: {rec.label}'s difference-process phase ([discrepancy] enabled) is not "
-                "part of the joint calibration: its calibrate stage's likelihood is"
+            notes.append(
+                f"{rec.label}'s difference-process phase ([discrepancy] enabled) is not part "
+                "of the joint calibration, which uses its calibrate stage's likelihood"
             )
         others = {n for r in records if r is not rec for n in r.calibrated}
         if not others & set(rec.calibrated):
-            say(f"note: {rec.label} shares no parameter with the others: its posterior is its own")
+            notes.append(
+                f"{rec.label} shares no parameter with the others: its posterior is its own"
+            )
         if rec.held:
-            say(f"note: {rec.label} holds {', '.join(rec.held)} at its values (not calibrated)")
+            notes.append(f"{rec.label} holds {', '.join(rec.held)} at its values (not calibrated)")
+    for note in notes:
+        say(f"note: {note}")
     with writing(out):
         out.mkdir(parents=True, exist_ok=True)
     chains_dir = out / f"chains-{_key(found, chosen)}"
@@ -346,10 +358,13 @@ def joint(
             atomic_write_text(out / SUMMARY_FILE, summary.to_csv(index=False)),
             plot_joint(out / FIGURE_FILE, post, alone),
             atomic_write_text(
-                out / MARKDOWN_FILE, joint_markdown(summary, list(alone), warnings, FIGURE_FILE)
+                out / MARKDOWN_FILE,
+                joint_markdown(summary, list(alone), warnings, FIGURE_FILE, notes),
             ),
         )
-    return JointResult(post, summary, tuple(alone), files, tuple(warnings), seconds=seconds)
+    return JointResult(
+        post, summary, tuple(alone), files, tuple(warnings), tuple(notes), seconds=seconds
+    )
 
 
 def _derived(ctx: Context, post: Posterior) -> dict[str, Derived]:

@@ -88,7 +88,9 @@ def plot_joint(path: str | Path, joint: Posterior, alone: Mapping[str, Posterior
         ax.set_xlabel(_axis_label(joint, name))
     for ax in list(axes.flat)[len(names) :]:
         ax.set_visible(False)
-    axes.flat[0].legend(fontsize=8, frameon=False)
+    shown = [ax for ax in axes.flat if ax.get_visible()]
+    if shown:
+        shown[0].legend(fontsize=8, frameon=False)
     fig.suptitle("Each record alone and both together (bars: 95 % intervals)", fontsize=10)
     fig.tight_layout()
     return save_figure(fig, path)
@@ -101,7 +103,11 @@ def interval_cell(by: pd.DataFrame, source: str) -> str:
 
 
 def joint_markdown(
-    summary: pd.DataFrame, labels: Sequence[str], warnings: Sequence[str], figure: str
+    summary: pd.DataFrame,
+    labels: Sequence[str],
+    warnings: Sequence[str],
+    figure: str,
+    notes: Sequence[str] = (),
 ) -> str:
     """``joint.md``: the warnings first, then each parameter's mean and 95 % interval
     from each study alone and jointly, then the figure."""
@@ -121,5 +127,6 @@ def joint_markdown(
         cells = [interval_cell(by, s) if s in by.index else "–" for s in sources]
         unit = str(group["unit"].iloc[0])
         lines.append(f"| {name!s} | {unit} | " + " | ".join(cells) + " |")
-    lines += ["", f"![each record alone and together]({figure})", ""]
+    lines += [""] + [f"Note: {n}" for n in notes] + ([""] if notes else [])
+    lines += [f"![each record alone and together]({figure})", ""]
     return "\n".join(lines)

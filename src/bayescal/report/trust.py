@@ -34,11 +34,13 @@ from bayescal.design import PosteriorPrior
 
 __all__ = [
     "ABSORBS",
+    "CONFLICT",
     "MISSES",
     "NO_BETTER",
     "CatalogueVerdict",
     "catalogue_verdicts",
     "held_out_outputs",
+    "prior_conflicts",
     "trust_warnings",
 ]
 
@@ -224,7 +226,8 @@ def trust_warnings(
     ----------
     posterior
         The calibration's posterior: its parameters leaning on a prior bound
-        (:func:`bayescal.calibration.bounds.bound_warnings`).
+        (:func:`bayescal.calibration.bounds.bound_warnings`), and its centre in the
+        thin tail of a prior from a previous posterior (:func:`prior_conflicts`).
     discrepancy
         The difference-process phase's theta* posterior, if estimated (the same).
     metrics
