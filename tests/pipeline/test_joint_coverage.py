@@ -1,0 +1,55 @@
+"""Coverage of the 95 % intervals of a joint calibration of two records (``bayescal joint``).
+
+The ten known truths of ``test_prior_from_coverage.py`` (the same seed, the same
+14-day records): the first study calibrates on the record's first eight days,
+the second (its own study, no ``prior_from``) on the record from the first's
+test window (less one warm-up) to the end, and :func:`bayescal.pipeline.joint.joint`
+calibrates both together. Its 95 % intervals of the two parameters, 20 in all,
+must cover the truths at least 16 times: under independent intervals of
+coverage 0.95 that happens with probability 0.984, at 0.90 with 0.867, at 0.6
+with 0.051 (a record counted twice, or one record's likelihood dropped, would
+narrow or shift them).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from bayescal.config import load_study
+from bayescal.pipeline import Options, run
+from bayescal.pipeline.joint import joint
+from sequential_study import END, record, write_study
+from virtual_wall import random_truth
+
+TRUTHS = 10
+LEAST = 16  # of 2 * TRUTHS intervals
+
+
+@pytest.mark.slow
+def test_joint_intervals_of_two_records_cover_the_truths(tmp_path: Path) -> None:
+    rng = np.random.default_rng(34)  # the truths of test_prior_from_coverage.py
+    covered: list[bool] = []
+    seen: list[str] = []
+    for case in range(TRUTHS):
+        truth = random_truth(rng) | {"cp_fb": 840.0}
+        folder = tmp_path / f"truth-{case}"
+        write_study(folder, data=record(truth, seed=100 + case))
+        run(load_study(folder), until="calibrate", options=Options(backend="serial"))
+        second_file = folder / "second.toml"
+        text = (folder / "study.toml").read_text(encoding="utf-8")
+        text = text.replace(f'end = "{END}"\n', 'start = "2012-02-07T00:00"\n')
+        text = text.replace(f'name = "{folder.name}"', f'name = "{folder.name}-second"')
+        text = text.replace("[data]", 'output_dir = "out/second"\n\n[data]', 1)
+        second_file.write_text(text, encoding="utf-8")
+        run(load_study(second_file), until="calibrate", options=Options(backend="serial"))
+        post = joint([folder, second_file], folder / "joint").posterior
+        lower, upper = post.interval(0.95)
+        for k, name in enumerate(post.names):
+            inside = bool(lower[k] <= truth[name] <= upper[k])
+            covered.append(inside)
+            seen.append(f"{name}={truth[name]:.4g} in [{lower[k]:.4g}, {upper[k]:.4g}]: {inside}")
+    print(f"{sum(covered)} of {len(covered)} intervals cover the truths")
+    assert sum(covered) >= LEAST, "\n".join(seen)
