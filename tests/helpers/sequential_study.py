@@ -9,6 +9,7 @@ that a second study or ``bayescal update`` has the rest.
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -55,3 +56,32 @@ def write_study(
     text = text.replace("seed = 11\n", "seed = 11\n" + extra)
     (folder / "study.toml").write_text(text, encoding="utf-8")
     return folder
+
+
+def second_study(folder: Path, prior_from: bool) -> Path:
+    """``folder/second.toml``: the study of ``folder`` on its record from the first test
+    window (less one warm-up) to the end, as ``bayescal update`` writes it, its results in
+    ``out/second``; with ``prior_from`` the first study's posterior as its prior, else a
+    study of its own (named ``<folder>-second``)."""
+    text = (folder / "study.toml").read_text(encoding="utf-8")
+    text = text.replace(f'end = "{END}"\n', 'start = "2012-02-07T00:00"\n')
+    if prior_from:
+        text = text.replace("seed = 11\n", 'seed = 11\nprior_from = "study.toml"\n')
+    else:
+        text = text.replace(f'name = "{folder.name}"', f'name = "{folder.name}-second"')
+    text = text.replace("[data]", 'output_dir = "out/second"\n\n[data]', 1)
+    path = folder / "second.toml"
+    path.write_text(text, encoding="utf-8")
+    return path
+
+
+def interval_hits(post: Any, truth: dict[str, float], seen: list[str]) -> list[bool]:
+    """Whether each parameter's 95 % interval of ``post`` holds its truth (a line each in
+    ``seen``)."""
+    lower, upper = post.interval(0.95)
+    hits = []
+    for k, name in enumerate(post.names):
+        inside = bool(lower[k] <= truth[name] <= upper[k])
+        hits.append(inside)
+        seen.append(f"{name}={truth[name]:.4g} in [{lower[k]:.4g}, {upper[k]:.4g}]: {inside}")
+    return hits

@@ -21,7 +21,7 @@ import pytest
 from bayescal.config import load_study
 from bayescal.pipeline import Options, run
 from bayescal.pipeline.joint import joint
-from sequential_study import END, record, write_study
+from sequential_study import interval_hits, record, second_study, write_study
 from virtual_wall import random_truth
 
 TRUTHS = 10
@@ -38,18 +38,9 @@ def test_joint_intervals_of_two_records_cover_the_truths(tmp_path: Path) -> None
         folder = tmp_path / f"truth-{case}"
         write_study(folder, data=record(truth, seed=100 + case))
         run(load_study(folder), until="calibrate", options=Options(backend="serial"))
-        second_file = folder / "second.toml"
-        text = (folder / "study.toml").read_text(encoding="utf-8")
-        text = text.replace(f'end = "{END}"\n', 'start = "2012-02-07T00:00"\n')
-        text = text.replace(f'name = "{folder.name}"', f'name = "{folder.name}-second"')
-        text = text.replace("[data]", 'output_dir = "out/second"\n\n[data]', 1)
-        second_file.write_text(text, encoding="utf-8")
+        second_file = second_study(folder, prior_from=False)
         run(load_study(second_file), until="calibrate", options=Options(backend="serial"))
         post = joint([folder, second_file], folder / "joint").posterior
-        lower, upper = post.interval(0.95)
-        for k, name in enumerate(post.names):
-            inside = bool(lower[k] <= truth[name] <= upper[k])
-            covered.append(inside)
-            seen.append(f"{name}={truth[name]:.4g} in [{lower[k]:.4g}, {upper[k]:.4g}]: {inside}")
+        covered += interval_hits(post, truth, seen)
     print(f"{sum(covered)} of {len(covered)} intervals cover the truths")
     assert sum(covered) >= LEAST, "\n".join(seen)

@@ -28,7 +28,7 @@ from scipy import stats
 
 from bayescal.config import load_study
 from bayescal.pipeline import Options, load_results, run
-from sequential_study import END, record, write_study
+from sequential_study import interval_hits, record, second_study, write_study
 from virtual_wall import random_truth
 
 TRUTHS = 10
@@ -47,20 +47,10 @@ def test_intervals_after_prior_from_cover_the_truths(tmp_path: Path) -> None:
         write_study(folder, data=record(truth, seed=100 + case))
         first = load_study(folder)
         run(first, until="calibrate", options=Options(backend="serial"))
-        second_file = folder / "second.toml"
-        text = (folder / "study.toml").read_text(encoding="utf-8")
-        text = text.replace(f'end = "{END}"\n', 'start = "2012-02-07T00:00"\n')
-        text = text.replace("seed = 11\n", 'seed = 11\nprior_from = "study.toml"\n')
-        text = text.replace("[data]", 'output_dir = "out/second"\n\n[data]', 1)
-        second_file.write_text(text, encoding="utf-8")
-        second = load_study(second_file)
+        second = load_study(second_study(folder, prior_from=True))
         run(second, until="calibrate", options=Options(backend="serial"))
         post = load_results(second).posterior
         assert post is not None
-        lower, upper = post.interval(0.95)
-        for k, name in enumerate(post.names):
-            inside = bool(lower[k] <= truth[name] <= upper[k])
-            covered.append(inside)
-            seen.append(f"{name}={truth[name]:.4g} in [{lower[k]:.4g}, {upper[k]:.4g}]: {inside}")
+        covered += interval_hits(post, truth, seen)
     print(f"{sum(covered)} of {len(covered)} intervals cover the truths")
     assert sum(covered) >= LEAST, "\n".join(seen)
