@@ -8,6 +8,7 @@ that a second study or ``bayescal update`` has the rest.
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -85,3 +86,21 @@ def interval_hits(post: Any, truth: dict[str, float], seen: list[str]) -> list[b
         hits.append(inside)
         seen.append(f"{name}={truth[name]:.4g} in [{lower[k]:.4g}, {upper[k]:.4g}]: {inside}")
     return hits
+
+
+def calibrated_truths(root: Path, truths: int, seed: int = 34) -> Iterator[tuple[Path, dict]]:
+    """``truths`` known truths of the wall (``k_cb`` and ``cp_cb`` from the inner 80 % of
+    the priors, :func:`virtual_wall.random_truth` with ``default_rng(seed)``), each a
+    14-day record with noise seed ``100 + case`` and its study in ``root/truth-<case>``
+    calibrated on the first eight days: ``(folder, truth)`` one after another."""
+    from bayescal.config import load_study
+    from bayescal.pipeline import Options, run
+    from virtual_wall import random_truth
+
+    rng = np.random.default_rng(seed)
+    for case in range(truths):
+        truth = random_truth(rng) | {"cp_fb": 840.0}
+        folder = root / f"truth-{case}"
+        write_study(folder, data=record(truth, seed=100 + case))
+        run(load_study(folder), until="calibrate", options=Options(backend="serial"))
+        yield folder, truth

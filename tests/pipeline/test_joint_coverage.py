@@ -15,14 +15,12 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import numpy as np
 import pytest
 
 from bayescal.config import load_study
 from bayescal.pipeline import Options, run
 from bayescal.pipeline.joint import joint
-from sequential_study import interval_hits, record, second_study, write_study
-from virtual_wall import random_truth
+from sequential_study import calibrated_truths, interval_hits, second_study
 
 TRUTHS = 10
 LEAST = 16  # of 2 * TRUTHS intervals
@@ -30,14 +28,9 @@ LEAST = 16  # of 2 * TRUTHS intervals
 
 @pytest.mark.slow
 def test_joint_intervals_of_two_records_cover_the_truths(tmp_path: Path) -> None:
-    rng = np.random.default_rng(34)  # the truths of test_prior_from_coverage.py
     covered: list[bool] = []
     seen: list[str] = []
-    for case in range(TRUTHS):
-        truth = random_truth(rng) | {"cp_fb": 840.0}
-        folder = tmp_path / f"truth-{case}"
-        write_study(folder, data=record(truth, seed=100 + case))
-        run(load_study(folder), until="calibrate", options=Options(backend="serial"))
+    for folder, truth in calibrated_truths(tmp_path, TRUTHS):
         second_file = second_study(folder, prior_from=False)
         run(load_study(second_file), until="calibrate", options=Options(backend="serial"))
         post = joint([folder, second_file], folder / "joint").posterior

@@ -22,14 +22,12 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import numpy as np
 import pytest
 from scipy import stats
 
 from bayescal.config import load_study
 from bayescal.pipeline import Options, load_results, run
-from sequential_study import interval_hits, record, second_study, write_study
-from virtual_wall import random_truth
+from sequential_study import calibrated_truths, interval_hits, second_study
 
 TRUTHS = 10
 LEAST = 16  # of 2 * TRUTHS intervals
@@ -38,15 +36,9 @@ LEAST = 16  # of 2 * TRUTHS intervals
 @pytest.mark.slow
 def test_intervals_after_prior_from_cover_the_truths(tmp_path: Path) -> None:
     assert stats.binom(2 * TRUTHS, 0.95).sf(LEAST - 1) > 0.98  # the docstring's figure
-    rng = np.random.default_rng(34)
     covered: list[bool] = []
     seen: list[str] = []
-    for case in range(TRUTHS):
-        truth = random_truth(rng) | {"cp_fb": 840.0}
-        folder = tmp_path / f"truth-{case}"
-        write_study(folder, data=record(truth, seed=100 + case))
-        first = load_study(folder)
-        run(first, until="calibrate", options=Options(backend="serial"))
+    for folder, truth in calibrated_truths(tmp_path, TRUTHS):
         second = load_study(second_study(folder, prior_from=True))
         run(second, until="calibrate", options=Options(backend="serial"))
         post = load_results(second).posterior
