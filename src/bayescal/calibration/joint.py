@@ -25,6 +25,7 @@ does for one record, and :func:`calibrate_joint` samples it to convergence.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 import os
 from collections.abc import Callable, Mapping, Sequence
@@ -39,6 +40,7 @@ from bayescal.calibration.priors import ThetaPriors
 from bayescal.calibration.target import CalibrationPosterior, Moves, default_sampler, default_starts
 from bayescal.design import Prior
 from bayescal.emulator.kernel import FloatArray
+from bayescal.emulator.kron import Lru
 from bayescal.errors import ConfigError
 from bayescal.mcmc.chains import ChainBackend, dispersed_starts, run_chains
 from bayescal.mcmc.samplers.mwg import MetropolisWithinGibbs
@@ -115,6 +117,21 @@ class JointPosterior:
             self._maps.append((columns, fill, offset))
             offset += rec.n_aux
         self.d = offset
+        self._reset()
+
+    def _reset(self) -> None:
+        # a move of one record's error parameters leaves the others' vectors as they
+        # were: their terms are kept for the current state and the last proposal
+        self._memos = [Lru(3) for _ in self.records]
+
+    def __getstate__(self) -> dict[str, Any]:
+        state = self.__dict__.copy()
+        state.pop("_memos")
+        return state
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        self.__dict__.update(state)
+        self._reset()
 
     @property
     def aux_names(self) -> tuple[str, ...]:
@@ -138,12 +155,20 @@ class JointPosterior:
             if total == -math.inf:
                 return total
             own = self.record_vector(k, arr)
-            value = rec.target(own)
+            value = self._memos[k].get(own.tobytes(), functools.partial(_term, rec, own))
             if value == -math.inf:
                 return value
-            # its theta prior is the joint one, counted once above
-            total += value - rec.target.prior_terms.theta_priors.scalar(own[: rec.target.t])
+            total += value
         return total
+
+
+def _term(rec: Record, own: FloatArray) -> float:
+    """Record ``rec``'s log posterior at its vector ``own`` without its theta prior (the
+    joint one counts once)."""
+    value = float(rec.target(own))
+    if value == -math.inf:
+        return value
+    return value - rec.target.prior_terms.theta_priors.scalar(own[: rec.target.t])
 
 
 def joint_sampler(
